@@ -1,0 +1,55 @@
+"""socbjax: a JAX-differentiable String-Of-Continuous-Beams simulator of slender filaments.
+
+The method is that of Simhadri & Chandran, Sci. Rep. 2019 (SOCB), with the corrections and
+the frame-free 3D form documented in ``docs/equations.md``.
+
+Units everywhere: length µm, force pN, time s, bending stiffness EI pN·µm², moments pN·µm.
+
+Importing socbjax enables JAX's float64 mode (``jax_enable_x64``): the physics is float64
+throughout and large-deflection Newton solves are not reliable in float32.
+"""
+
+import jax as _jax
+
+_jax.config.update("jax_enable_x64", True)
+
+from ._builders import SUPPORTS, cantilever, column  # noqa: E402
+from ._continuation import ContinuationResult, ContinuationSettings, load_continuation  # noqa: E402
+from ._jointed import JointedModel, JointedState  # noqa: E402
+from ._network import Network, make_network  # noqa: E402
+from ._newton import NewtonResult, NewtonSolver, Status  # noqa: E402
+from ._quadrature import coupling_matrix, gauss_legendre, quintic_coefficients  # noqa: E402
+from ._residual import SOCBModel, SOCBState, socb_residual  # noqa: E402
+from ._solve import MODELS, ConvergenceError, Solution, buckling_load, forces_array, make_model, solve  # noqa: E402
+
+__version__ = "0.1.0"
+
+__all__ = [
+    "__version__",
+    "Network",
+    "make_network",
+    "cantilever",
+    "column",
+    "SUPPORTS",
+    "solve",
+    "buckling_load",
+    "Solution",
+    "Status",
+    "ConvergenceError",
+    "NewtonSolver",
+    "NewtonResult",
+    "ContinuationSettings",
+    "ContinuationResult",
+    "load_continuation",
+    "SOCBModel",
+    "SOCBState",
+    "JointedModel",
+    "JointedState",
+    "MODELS",
+    "make_model",
+    "forces_array",
+    "socb_residual",
+    "coupling_matrix",
+    "quintic_coefficients",
+    "gauss_legendre",
+]

@@ -1,0 +1,123 @@
+"""Frame-free geometry on the unit sphere of tangent directions (used by the 3D SOCB segment).
+
+A 3D segment interpolates its tangent t(s) in the *log chart* centred at the segment's mean
+tangent u (``sphere_log``/``sphere_exp``, the azimuthal-equidistant chart): w(s) = log_u t(s)
+is a vector in the plane ⊥ u whose length is the angle between u and t(s).  The chart needs
+no choice of axes (it commutes with every rotation), has no singularity for any direction in
+space (±z included), and maps a planar curve through u to the straight line of its angle,
+so the 3D interpolant reduces exactly to the planar quintic of Eq. 5.
+
+All functions are smooth, with Taylor branches near zero angle so that ``jax.jacfwd`` of
+them is finite for straight segments (the double-``where`` trick).
+"""
+
+from __future__ import annotations
+
+import jax.numpy as jnp
+from jaxtyping import Array, Float
+
+__all__ = [
+    "cross",
+    "sphere_log",
+    "sphere_exp",
+    "sphere_exp_differential_inverse",
+    "rotation_vector",
+    "orthonormal_complement",
+]
+
+_SMALL = 1e-2  # squared-angle threshold below which Taylor series are used (error < 1e-16)
+
+# Taylor coefficients in q = ρ² (computed with sympy; see module docstring).
+_ATAN_OVER = (1.0, -1 / 3, 1 / 5, -1 / 7, 1 / 9, -1 / 11, 1 / 13)  # atan(ρ)/ρ
+_COS = (1.0, -1 / 2, 1 / 24, -1 / 720, 1 / 40320, -1 / 3628800, 1 / 479001600)
+_SINC = (1.0, -1 / 6, 1 / 120, -1 / 5040, 1 / 362880, -1 / 39916800, 1 / 6227020800)
+# h(ρ) = (ρ/sin ρ − 1/cos ρ)/ρ²
+_H = (
+    -1 / 3,
+    -17 / 90,
+    -125 / 1512,
+    -2581 / 75600,
+    -832319 / 59875200,
+    -921964937 / 163459296000,
+    -299012803 / 130767436800,
+)
+
+
+def _series(coeffs: tuple[float, ...], q: Array) -> Array:
+    out = jnp.zeros_like(q) + coeffs[-1]
+    for c in reversed(coeffs[:-1]):
+        out = out * q + c
+    return out
+
+
+def _even_function(q: Array, direct, coeffs: tuple[float, ...]) -> Array:
+    """Evaluate an even function f(ρ) given q = ρ² ≥ 0, safely (and differentiably) at 0."""
+    small = q < _SMALL
+    q_safe = jnp.where(small, _SMALL, q)
+    return jnp.where(small, _series(coeffs, q), direct(jnp.sqrt(q_safe)))
+
+
+def cross(a: Array, b: Array) -> Array:
+    """Cross product of 3-vectors (last axis)."""
+    return jnp.cross(a, b)
+
+
+def sphere_log(u: Float[Array, "3"], t: Float[Array, "3"]) -> Float[Array, "3"]:
+    """Log map at the unit vector ``u`` of the direction of ``t`` (any non-zero length).
+
+    Returns w ⊥ u with |w| = angle(u, t) and w ∥ (t − (u·t) u).  Homogeneous of degree 0
+    in t.  Valid for angle(u, t) < 90°, which holds for both ends of a segment when u is
+    the normalised sum of its end tangents.
+    """
+    c = jnp.dot(u, t)
+    x = t - c * u
+    q = jnp.dot(x, x) / (c * c)  # tan² of the angle
+    # angle / |x| = atan(√q)/√q / c
+    factor = _even_function(q, lambda r: jnp.arctan(r) / r, _ATAN_OVER) / c
+    return factor * x
+
+
+def sphere_exp(u: Float[Array, "3"], w: Float[Array, "3"]) -> Float[Array, "3"]:
+    """Exponential map at the unit vector ``u`` of w ⊥ u: cos|w| u + sin|w| w/|w|."""
+    q = jnp.dot(w, w)
+    cos = _even_function(q, jnp.cos, _COS)
+    sinc = _even_function(q, lambda r: jnp.sin(r) / r, _SINC)
+    return cos * u + sinc * w
+
+
+def sphere_exp_differential_inverse(
+    u: Float[Array, "3"], w: Float[Array, "3"], y: Float[Array, "3"]
+) -> Float[Array, "3"]:
+    """(D exp_u(w))⁻¹ y for a vector y tangent to the sphere at exp_u(w); result ⊥ u.
+
+    With ρ = |w|, p = u × w: the radial direction is stretched by 1 and the transverse one
+    by sin ρ/ρ, which gives  P_u y / cos ρ + h(ρ) (y·p) p  with h = (ρ/sin ρ − 1/cos ρ)/ρ².
+    """
+    q = jnp.dot(w, w)
+    cos = _even_function(q, jnp.cos, _COS)
+    h = _even_function(q, lambda r: (r / jnp.sin(r) - 1.0 / jnp.cos(r)) / (r * r), _H)
+    p = jnp.cross(u, w)
+    projected = y - jnp.dot(u, y) * u
+    return projected / cos + h * jnp.dot(y, p) * p
+
+
+def rotation_vector(a: Float[Array, "3"], b: Float[Array, "3"]) -> Float[Array, "3"]:
+    """Rotation vector (angle × unit axis) of the smallest rotation taking direction a to b."""
+    c = jnp.dot(a, b)
+    axb = jnp.cross(a, b)
+    q = jnp.dot(axb, axb) / (c * c)
+    factor = _even_function(q, lambda r: jnp.arctan(r) / r, _ATAN_OVER) / c
+    return factor * axb
+
+
+def orthonormal_complement(u: Float[Array, "3"]) -> Float[Array, "2 3"]:
+    """Two orthonormal vectors spanning the plane ⊥ the unit vector u.
+
+    Not smooth over the whole sphere (no such field exists); used only with values frozen
+    for the duration of a Newton solve, where only the span matters.
+    """
+    axis = jnp.eye(3)[jnp.argmin(jnp.abs(u))]
+    f = axis - jnp.dot(axis, u) * u
+    f = f / jnp.linalg.norm(f)
+    g = jnp.cross(u, f)
+    return jnp.stack([f, g])

@@ -1,0 +1,124 @@
+"""Damped Newton on ``jax.jacfwd`` Jacobians, jit-compatible, with a status for every result.
+
+The solver acts on a flat vector x and a residual ``fn(x) -> R`` of the same size (the
+SOCB and jointed systems are square).  Each iteration assembles the Jacobian by forward
+mode, solves J Δx = −R with a pluggable ``lineax`` solver (dense LU by default) and takes
+the largest step α ∈ {1, ½, ¼, …} that decreases ‖R‖₂ (Armijo backtracking on ½‖R‖²).
+Convergence is ‖R‖_∞ ≤ ``atol`` on the dimensionless residual.  A result never hides a
+failure: ``status`` says why the iteration stopped.
+"""
+
+from __future__ import annotations
+
+import enum
+from collections.abc import Callable
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+import lineax as lx
+from jaxtyping import Array, Float, Int
+
+__all__ = ["Status", "NewtonSolver", "NewtonResult"]
+
+
+class Status(enum.IntEnum):
+    """Why a solve stopped.  Only ``CONVERGED`` is an answer."""
+
+    CONVERGED = 0
+    MAX_ITERATIONS = 1
+    NONFINITE = 2
+    LINE_SEARCH_FAILED = 3
+    CONTINUATION_FAILED = 4
+
+    @property
+    def message(self) -> str:
+        return {
+            Status.CONVERGED: "converged",
+            Status.MAX_ITERATIONS: "Newton reached its iteration limit without converging",
+            Status.NONFINITE: "the residual or Newton step became NaN/inf",
+            Status.LINE_SEARCH_FAILED: "the line search could not reduce the residual (singular or ill-posed system)",
+            Status.CONTINUATION_FAILED: "load continuation cut the step below its minimum without converging",
+        }[self]
+
+
+_RUNNING = -1
+
+
+class NewtonResult(eqx.Module):
+    """Outcome of one Newton solve: final iterate, status code, iterations, ‖R‖_∞."""
+
+    x: Float[Array, " n"]
+    status: Int[Array, ""]
+    iterations: Int[Array, ""]
+    residual_norm: Float[Array, ""]
+
+    @property
+    def converged(self) -> Array:
+        return self.status == Status.CONVERGED
+
+
+class NewtonSolver(eqx.Module):
+    """Damped Newton with Armijo backtracking.
+
+    Parameters
+    ----------
+    atol : convergence threshold on ‖R‖_∞ of the dimensionless residual.
+    max_iterations : Newton iterations before giving up (``Status.MAX_ITERATIONS``).
+    max_backtracks : step halvings allowed per iteration (``Status.LINE_SEARCH_FAILED``).
+    linear_solver : any square ``lineax`` solver (default dense LU).
+    """
+
+    atol: float = 1e-10
+    max_iterations: int = 40
+    max_backtracks: int = 16
+    linear_solver: lx.AbstractLinearSolver = lx.LU()
+
+    def __call__(self, fn: Callable[[Array], Array], x0: Float[Array, " n"]) -> NewtonResult:
+        r0 = fn(x0)
+        norm0 = _inf_norm(r0)
+        status0 = jnp.where(norm0 <= self.atol, Status.CONVERGED, _RUNNING)
+        status0 = jnp.where(jnp.isfinite(norm0), status0, Status.NONFINITE).astype(jnp.int32)
+
+        def cond(carry):
+            return carry[3] == _RUNNING
+
+        def body(carry):
+            x, r, iteration, _ = carry
+            jac = jax.jacfwd(fn)(x)
+            sol = lx.linear_solve(lx.MatrixLinearOperator(jac), -r, self.linear_solver, throw=False)
+            step = sol.value
+            merit = jnp.sum(r * r)
+
+            def ls_cond(ls):
+                alpha, k, _, new_merit = ls
+                bad = ~(new_merit <= (1.0 - 1e-4 * alpha) * merit)  # also catches NaN
+                return bad & (k < self.max_backtracks)
+
+            def ls_body(ls):
+                alpha, k, _, _ = ls
+                alpha = 0.5 * alpha
+                r_new = fn(x + alpha * step)
+                return alpha, k + 1, r_new, jnp.sum(r_new * r_new)
+
+            r_full = fn(x + step)
+            alpha, k, r_new, new_merit = jax.lax.while_loop(
+                ls_cond, ls_body, (jnp.asarray(1.0, x.dtype), 0, r_full, jnp.sum(r_full * r_full))
+            )
+            accepted = new_merit <= (1.0 - 1e-4 * alpha) * merit
+            x_new = jnp.where(accepted, x + alpha * step, x)
+            r_new = jnp.where(accepted, r_new, r)
+            norm = _inf_norm(r_new)
+            iteration = iteration + 1
+            status = jnp.where(norm <= self.atol, Status.CONVERGED, _RUNNING)
+            status = jnp.where((status == _RUNNING) & ~accepted, Status.LINE_SEARCH_FAILED, status)
+            status = jnp.where(jnp.all(jnp.isfinite(step)) & jnp.isfinite(norm), status, Status.NONFINITE)
+            status = jnp.where((status == _RUNNING) & (iteration >= self.max_iterations), Status.MAX_ITERATIONS, status)
+            return x_new, r_new, iteration, status.astype(jnp.int32)
+
+        x, r, iterations, status = jax.lax.while_loop(cond, body, (x0, r0, jnp.zeros((), jnp.int32), status0))
+        return NewtonResult(x=x, status=status, iterations=iterations, residual_norm=_inf_norm(r))
+
+
+def _inf_norm(r: Array) -> Array:
+    return jnp.max(jnp.abs(r))

@@ -1,0 +1,156 @@
+"""The SOCB system of a whole network: segment equations (vmapped), force balance (Eq. 10)
+and supports, with state packing.
+
+Unknowns (:class:`SOCBState`):
+
+* per node: position r (d), direction (2D: angle θ; 3D: tangent t ∈ R³ with |t| = 1 imposed
+  as an equation, so that no direction is singular), bending moment m (2D: scalar; 3D:
+  vector with m·t = 0 imposed: the rod is torsion-free);
+* per segment: internal force n (d).
+
+Equations, all dimensionless (forces by EI/l², moments by EI/l, lengths by l, with the
+network's mean l and EI):
+
+* per segment: the kernel of :mod:`socbjax._segment` (2D: 4 rows, 3D: 7 rows);
+* per node, candidates from which ``Network.socb_rows`` selects statically:
+  - force balance (Eq. 10)  Σ_{ending at i} n − Σ_{starting at i} n − F_i = 0  in the free
+    directions of the node, prescribed position in the constrained ones;
+  - 2D: θ = θ_ref where clamped; m = 0 at free/pinned ends;
+  - 3D: |t|² = 1 (or t = t_ref where clamped); m·t = 0 (or m = 0 at free/pinned ends).
+
+Count (clamped–free chain, N nodes): 2D 6N − 2 unknowns and equations, 3D 12N − 3.
+"""
+
+from __future__ import annotations
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+from jaxtyping import Array, Float
+
+from ._geometry import orthonormal_complement
+from ._network import Network
+from ._quadrature import SegmentQuadrature
+from ._segment import planar_segment_residual, spatial_segment_residual
+
+__all__ = ["SOCBState", "socb_initial_state", "socb_residual", "socb_frames", "net_nodal_force", "reference_scales"]
+
+
+class SOCBState(eqx.Module):
+    """Unknowns of the SOCB system (see module docstring for shapes and units)."""
+
+    positions: Float[Array, "N d"]
+    directors: Array  # 2D: angles [N] (rad); 3D: tangents [N, 3]
+    moments: Array  # 2D: [N] (pN·µm); 3D: [N, 3]
+    forces: Float[Array, "S d"]  # internal force per segment (pN)
+
+
+def socb_initial_state(network: Network) -> SOCBState:
+    """The unloaded straight reference state (an exact solution at zero load)."""
+    if network.dim == 2:
+        directors = jnp.arctan2(network.tangents[:, 1], network.tangents[:, 0])
+        moments = jnp.zeros(network.n_nodes)
+    else:
+        directors = network.tangents
+        moments = jnp.zeros((network.n_nodes, 3))
+    return SOCBState(
+        positions=network.positions,
+        directors=directors,
+        moments=moments,
+        forces=jnp.zeros((network.n_segments, network.dim)),
+    )
+
+
+def reference_scales(network: Network):
+    """(length µm, EI pN·µm², force pN) used to make residual rows dimensionless."""
+    length = jnp.mean(network.lengths)
+    EI = jnp.mean(network.EI)
+    return length, EI, EI / length**2
+
+
+def socb_frames(state: SOCBState, network: Network) -> Float[Array, "S 2 3"]:
+    """Per-segment 'analysis frames' (paper Fig. 3): a basis of the plane ⊥ the segment's
+    mean tangent, taken from ``state`` and held fixed during a Newton solve."""
+    if network.dim == 2:
+        return jnp.zeros((network.n_segments, 2, 3))
+    t = state.directors / jnp.linalg.norm(state.directors, axis=-1, keepdims=True)
+    mean = t[network.segments[:, 0]] + t[network.segments[:, 1]]
+    mean = mean / jnp.linalg.norm(mean, axis=-1, keepdims=True)
+    return jax.lax.stop_gradient(jax.vmap(orthonormal_complement)(mean))
+
+
+def net_nodal_force(forces: Float[Array, "S d"], network: Network, loads: Float[Array, "N d"]) -> Float[Array, "N d"]:
+    """Σ_{ending} n − Σ_{starting} n − F at each node (pN): zero at free nodes, minus the
+    support reaction at supported ones."""
+    n_nodes = network.n_nodes
+    ending = jax.ops.segment_sum(forces, network.segments[:, 1], num_segments=n_nodes)
+    starting = jax.ops.segment_sum(forces, network.segments[:, 0], num_segments=n_nodes)
+    return ending - starting - loads
+
+
+def _support_rows(state_positions, imbalance, network: Network):
+    length, _, force = reference_scales(network)
+    P = network.position_projector
+    dr = state_positions - network.positions
+    fixed = jnp.einsum("nij,nj->ni", P, dr) / length
+    eye = jnp.eye(network.dim)
+    free = jnp.einsum("nij,nj->ni", eye[None] - P, imbalance) / force
+    return fixed + free
+
+
+def socb_residual(
+    state: SOCBState,
+    network: Network,
+    loads: Float[Array, "N d"],
+    frames: Float[Array, "S 2 3"],
+    quad: SegmentQuadrature,
+) -> Float[Array, " R"]:
+    """The full SOCB residual vector (dimensionless), segment rows first, then node rows."""
+    a, b = network.segments[:, 0], network.segments[:, 1]
+    r, d, m = state.positions, state.directors, state.moments
+    length_ref, EI_ref, _ = reference_scales(network)
+    if network.dim == 2:
+        seg = jax.vmap(planar_segment_residual, in_axes=(0,) * 9 + (None,))(
+            r[a], d[a], m[a], r[b], d[b], m[b], state.forces, network.lengths, network.EI, quad
+        )
+    else:
+        seg = jax.vmap(spatial_segment_residual, in_axes=(0,) * 10 + (None,))(
+            r[a], d[a], m[a], r[b], d[b], m[b], state.forces, network.lengths, network.EI, frames, quad
+        )
+    imbalance = net_nodal_force(state.forces, network, loads)
+    support = _support_rows(r, imbalance, network)
+    moment_scale = length_ref / EI_ref
+    if network.dim == 2:
+        theta_ref = jnp.arctan2(network.tangents[:, 1], network.tangents[:, 0])
+        candidates = jnp.concatenate([support, (d - theta_ref)[:, None], (m * moment_scale)[:, None]], axis=1)
+    else:
+        candidates = jnp.concatenate(
+            [
+                support,
+                (0.5 * (jnp.sum(d * d, axis=1) - 1.0))[:, None],
+                d - network.tangents,
+                (jnp.sum(m * d, axis=1) * moment_scale)[:, None],
+                m * moment_scale,
+            ],
+            axis=1,
+        )
+    return jnp.concatenate([seg.ravel(), candidates.ravel()[network.socb_rows]])
+
+
+class SOCBModel(eqx.Module):
+    """The SOCB discretisation of a network, as used by the solvers.
+
+    ``quadrature_order`` Gauss–Legendre points per segment (Eq. 7; default 8).
+    """
+
+    network: Network
+    quad: SegmentQuadrature = eqx.field(static=True)
+
+    def initial_state(self) -> SOCBState:
+        return socb_initial_state(self.network)
+
+    def frames(self, state: SOCBState):
+        return socb_frames(state, self.network)
+
+    def residual(self, state: SOCBState, loads, frames):
+        return socb_residual(state, self.network, loads, frames, self.quad)

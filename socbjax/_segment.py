@@ -1,0 +1,164 @@
+"""Equations of one SOCB segment (paper Eqs 5–9), written for a single segment.
+
+The network residual lifts these with ``jax.vmap`` over segments.  Conventions: arc length
+s runs from the segment's start node a (s = 0) to its end node b (s = l).  ``n`` is the
+internal force in the segment (pN), constant along it (no distributed load): the force that
+the material beyond s exerts on the material before s.  ``m`` is the bending moment (pN·µm),
+m = EI θ' in the plane, m = EI t × t' in space; statics m' + t × n = 0.
+
+Planar segment (unknowns at each end: angle θ and moment m):
+
+* Eq. 2 coupling at each end:  EI θ''(end) = −(t × n)  (θ'' jumps at a point load, so it
+  belongs to the segment end, not to the node).
+* Eqs 5, 6a: quintic θ(s) from the Hermite data (θ, m/EI, θ'') at both ends.
+* Eq. 7:  r_b − r_a = ∫_0^l t(θ(s)) ds  (Gauss–Legendre).
+* Eq. 8:  m_b − m_a = −(r_b − r_a) × n  (chord projections are the moment arms).
+* Eq. 9:  EI (θ_b − θ_a) = ∫_0^l m ds = m_a l − [∫_0^l (l − s) t ds] × n  (exact integral
+  form; the printed Eq. 9 lacks 1/EI and the m_a l term and integrates over the chord).
+
+Spatial segment (unknowns at each end: unit tangent t and moment vector m ⊥ t):
+
+* End jets: t' = (m × t)/EI, and from (EI t'' + n) ∥ t with t·t'' = −|t'|²:
+  EI t'' = (n·t) t − n − EI |t'|² t.
+* The tangent is interpolated in the log chart at u = (t_a + t_b)/|t_a + t_b|
+  (see :mod:`socbjax._geometry`): w(s) = log_u t(s) is a quintic Hermite polynomial with
+  vector coefficients (Eqs 5, 6a applied component-wise in the plane ⊥ u), and
+  t(s) = exp_u w(s).  This replaces the paper's spherical angles in a rotated analysis
+  frame: it needs no frame, has no pole, and reduces exactly to the planar quintic when the
+  segment bends in any single plane.
+* Eq. 7:  r_b − r_a = ∫ t ds  (3 components).
+* Eq. 8:  P_u [m_b − m_a + (r_b − r_a) × n] = 0  (2 components; the dropped u-component
+  is the twist balance, which a torsion-free rod does not carry).
+* Eq. 9:  EI (w_b − w_a) = ∫_0^l (D exp_u w)⁻¹ [m(s) × t(s)] ds  (2 components, ⊥ u),
+  with m(s) = m_a − (r(s) − r_a) × n.  This is the exact integral of t' = m × t / EI in the
+  chart, and for planar bending it is literally the planar Eq. 9 above.
+
+Both kernels return dimensionless residuals: Eq. 7 divided by l, Eq. 8 by EI/l, Eq. 9 by EI.
+"""
+
+from __future__ import annotations
+
+import jax
+import jax.numpy as jnp
+from jaxtyping import Array, Float
+
+from ._geometry import sphere_exp, sphere_exp_differential_inverse, sphere_log
+from ._quadrature import SegmentQuadrature
+
+__all__ = ["planar_segment_residual", "spatial_segment_residual", "spatial_segment_tangents", "planar_segment_angles"]
+
+
+def _cross2(a: Array, b: Array) -> Array:
+    return a[..., 0] * b[..., 1] - a[..., 1] * b[..., 0]
+
+
+def planar_segment_angles(theta_a, m_a, theta_b, m_b, n, length, EI, basis) -> Float[Array, " K"]:
+    """θ at the points tabulated by ``basis`` ([K, 6] Hermite basis) from the end data."""
+    t_a = jnp.stack([jnp.cos(theta_a), jnp.sin(theta_a)])
+    t_b = jnp.stack([jnp.cos(theta_b), jnp.sin(theta_b)])
+    curv2_a = -_cross2(t_a, n) / EI
+    curv2_b = -_cross2(t_b, n) / EI
+    data = jnp.stack(
+        [theta_a, length * m_a / EI, length**2 * curv2_a, theta_b, length * m_b / EI, length**2 * curv2_b]
+    )
+    return basis @ data
+
+
+def planar_segment_residual(
+    r_a: Float[Array, "2"],
+    theta_a: Float[Array, ""],
+    m_a: Float[Array, ""],
+    r_b: Float[Array, "2"],
+    theta_b: Float[Array, ""],
+    m_b: Float[Array, ""],
+    n: Float[Array, "2"],
+    length: Float[Array, ""],
+    EI: Float[Array, ""],
+    quad: SegmentQuadrature,
+) -> Float[Array, "4"]:
+    """Residuals (Eq. 7 x, Eq. 7 y, Eq. 8, Eq. 9) of one planar segment, dimensionless."""
+    theta = planar_segment_angles(theta_a, m_a, theta_b, m_b, n, length, EI, quad.basis)
+    t = jnp.stack([jnp.cos(theta), jnp.sin(theta)], axis=-1)  # [K, 2]
+    w = jnp.asarray(quad.weights)
+    sigma = jnp.asarray(quad.points)
+    chord = r_b - r_a
+    length_eq = (chord - length * (w @ t)) / length
+    moment_eq = (m_b - m_a + _cross2(chord, n)) * length / EI
+    lever = length**2 * ((w * (1.0 - sigma)) @ t)  # ∫_0^l (l − s) t ds = ∫_0^l (r(s) − r_a) ds
+    bending_eq = (EI * (theta_b - theta_a) - (m_a * length - _cross2(lever, n))) / EI
+    return jnp.concatenate([length_eq, moment_eq[None], bending_eq[None]])
+
+
+def _log_jet(u, t, dt, ddt):
+    """(w, w', w'') of w = log_u(t(s)) from the jet (t, t', t'') by nested forward mode."""
+
+    def curve(eps):
+        return sphere_log(u, t + eps * dt + 0.5 * eps**2 * ddt)
+
+    def first(eps):
+        return jax.jvp(curve, (eps,), (jnp.ones_like(eps),))
+
+    zero = jnp.zeros((), dtype=t.dtype)
+    (w, dw), (_, ddw) = jax.jvp(first, (zero,), (jnp.ones_like(zero),))
+    return w, dw, ddw
+
+
+def _end_jet(t, m, n, EI):
+    t = t / jnp.linalg.norm(t)
+    dt = jnp.cross(m, t) / EI
+    ddt = (jnp.dot(n, t) * t - n) / EI - jnp.dot(dt, dt) * t
+    return t, dt, ddt
+
+
+def _spatial_interpolant(t_a, m_a, t_b, m_b, n, length, EI, basis):
+    """Mean tangent u, chart data w_a, w_b and the chart coordinates w at the basis points."""
+    t_a, dt_a, ddt_a = _end_jet(t_a, m_a, n, EI)
+    t_b, dt_b, ddt_b = _end_jet(t_b, m_b, n, EI)
+    u = t_a + t_b
+    u = u / jnp.linalg.norm(u)
+    w_a, dw_a, ddw_a = _log_jet(u, t_a, dt_a, ddt_a)
+    w_b, dw_b, ddw_b = _log_jet(u, t_b, dt_b, ddt_b)
+    data = jnp.stack([w_a, length * dw_a, length**2 * ddw_a, w_b, length * dw_b, length**2 * ddw_b])
+    return u, w_a, w_b, basis @ data  # [K, 3]
+
+
+def spatial_segment_tangents(t_a, m_a, t_b, m_b, n, length, EI, basis) -> Float[Array, "K 3"]:
+    """Unit tangents at the points tabulated by ``basis`` from the end data."""
+    u, _, _, w = _spatial_interpolant(t_a, m_a, t_b, m_b, n, length, EI, basis)
+    return jax.vmap(sphere_exp, in_axes=(None, 0))(u, w)
+
+
+def spatial_segment_residual(
+    r_a: Float[Array, "3"],
+    t_a: Float[Array, "3"],
+    m_a: Float[Array, "3"],
+    r_b: Float[Array, "3"],
+    t_b: Float[Array, "3"],
+    m_b: Float[Array, "3"],
+    n: Float[Array, "3"],
+    length: Float[Array, ""],
+    EI: Float[Array, ""],
+    frame: Float[Array, "2 3"],
+    quad: SegmentQuadrature,
+) -> Float[Array, "7"]:
+    """Residuals (Eq. 7 ×3, Eq. 8 ×2, Eq. 9 ×2) of one spatial segment, dimensionless.
+
+    ``frame`` spans (approximately) the plane ⊥ the segment's mean tangent; it only selects
+    which two independent combinations of the ⊥u components are returned, so the solution
+    does not depend on it (it must merely not be parallel to u).
+    """
+    u, w_a, w_b, w = _spatial_interpolant(t_a, m_a, t_b, m_b, n, length, EI, jnp.asarray(quad.basis))
+    t = jax.vmap(sphere_exp, in_axes=(None, 0))(u, w)  # [K, 3]
+    weights = jnp.asarray(quad.weights)
+    chord = r_b - r_a
+    length_eq = (chord - length * (weights @ t)) / length
+
+    def perp(v):
+        return frame @ (v - jnp.dot(u, v) * u)
+
+    moment_eq = perp(m_b - m_a + jnp.cross(chord, n)) * length / EI
+    offsets = length * (jnp.asarray(quad.integration) @ t)  # r(s_k) − r_a, [K, 3]
+    m = m_a[None, :] - jnp.cross(offsets, n[None, :])
+    rates = jax.vmap(sphere_exp_differential_inverse, in_axes=(None, 0, 0))(u, w, jnp.cross(m, t))
+    bending_eq = perp(EI * (w_b - w_a) - length * (weights @ rates)) / EI
+    return jnp.concatenate([length_eq, moment_eq, bending_eq])
