@@ -50,7 +50,18 @@ def _check_direction(direction, dim: int) -> np.ndarray:
     return d / norm
 
 
-def _chain(n_nodes: int, length, EI, dim: int, direction):
+def _check_origin(origin, dim: int) -> np.ndarray:
+    if origin is None:
+        return np.zeros(dim)
+    o = np.asarray(origin, dtype=np.float64).ravel()
+    if o.shape != (dim,):
+        raise ValueError(f"origin must have {dim} components for dim={dim}, got shape {o.shape}")
+    if not np.all(np.isfinite(o)):
+        raise ValueError(f"origin must be finite, got {origin!r}")
+    return o
+
+
+def _chain(n_nodes: int, length, EI, dim: int, direction, origin=None):
     n = _check_n_nodes(n_nodes)
     L = float(_check_positive("length", length, "µm"))
     EI_arr = _check_positive("EI", EI, "pN·µm²")
@@ -58,13 +69,15 @@ def _chain(n_nodes: int, length, EI, dim: int, direction):
         raise ValueError(f"EI must be a scalar or have one value per segment ({n - 1}), got shape {EI_arr.shape}")
     axis = _check_direction(direction, dim)
     s = np.linspace(0.0, L, n)
-    positions = s[:, None] * axis[None, :]
+    positions = _check_origin(origin, dim)[None, :] + s[:, None] * axis[None, :]
     tangents = np.tile(axis, (n, 1))
     segments = np.stack([np.arange(n - 1), np.arange(1, n)], axis=1)
     return n, L, EI_arr, axis, positions, tangents, segments
 
 
-def cantilever(n_nodes: int, *, length: float = 1.0, EI: float = 1.0, dim: int = 3, direction=None) -> Network:
+def cantilever(
+    n_nodes: int, *, length: float = 1.0, EI: float = 1.0, dim: int = 3, direction=None, origin=None
+) -> Network:
     """A straight filament from the origin along ``direction``: node 0 clamped, last node free.
 
     Parameters
@@ -74,8 +87,11 @@ def cantilever(n_nodes: int, *, length: float = 1.0, EI: float = 1.0, dim: int =
     EI : bending stiffness (pN·µm²), scalar or one value per segment.
     dim : 2 (planar) or 3 (spatial).
     direction : unit vector of the filament axis (normalised if not unit); default +x.
+    origin : position of the clamped node 0 (µm); default the origin.
     """
-    return column(n_nodes, length=length, EI=EI, supports=("clamped", "free"), dim=dim, direction=direction)
+    return column(
+        n_nodes, length=length, EI=EI, supports=("clamped", "free"), dim=dim, direction=direction, origin=origin
+    )
 
 
 def column(
@@ -86,6 +102,7 @@ def column(
     supports: Sequence[str] = ("clamped", "free"),
     dim: int = 3,
     direction=None,
+    origin=None,
 ) -> Network:
     """A straight column from the origin along ``direction`` with end ``supports``.
 
@@ -94,9 +111,10 @@ def column(
     to move along the axis (the axial load goes there); "clamped" or "pinned" at the last
     node fix its lateral position, "clamped" also its tangent.  Classic cases and their
     Euler loads (EI/L²): ("clamped", "free") π²/4, ("pinned", "pinned") π²,
-    ("clamped", "pinned") 20.19, ("clamped", "clamped") 4π².
+    ("clamped", "pinned") 20.19, ("clamped", "clamped") 4π².  ``origin``: position of
+    node 0 (µm), default the origin.  Other arguments as for :func:`cantilever`.
     """
-    n, L, EI_arr, axis, positions, tangents, segments = _chain(n_nodes, length, EI, dim, direction)
+    n, L, EI_arr, axis, positions, tangents, segments = _chain(n_nodes, length, EI, dim, direction, origin)
     if isinstance(supports, str) or len(supports) != 2:
         raise ValueError(f"supports must be a pair (first, last), e.g. ('clamped', 'free'), got {supports!r}")
     first, last = supports

@@ -3,7 +3,11 @@
 One compiled ``lax.while_loop``: each step predicts the next state by secant extrapolation
 of the last two accepted states, corrects with Newton, and on failure halves the step and
 retries from the last accepted state (automatic cut-back).  Quick convergence doubles the
-step.  If the step falls below ``min_step`` the run stops with
+step.  A step is also rejected when the sign of det J changes between the last accepted state
+and the new one: along a load path det J vanishes only at a critical point (limit load or
+bifurcation), so a sign change means Newton jumped to another branch (typically the unstable
+near-straight branch just past buckling) rather than following the path.  If steps are cut to
+``min_step`` for that reason the run stops with ``Status.CRITICAL_POINT``.  If the step falls below ``min_step`` the run stops with
 ``Status.CONTINUATION_FAILED`` and returns the last *accepted* state and its load factor:
 never a state that did not converge.
 """
@@ -29,6 +33,7 @@ class ContinuationSettings(eqx.Module):
     initial_step : first increment of λ.   min_step : smallest increment before giving up.
     max_step : largest increment.          max_steps : cap on attempted steps.
     fast_iterations : a step converging in at most this many iterations doubles the next.
+    check_path_continuity : reject steps across which sign(det J) changes (see module doc).
     """
 
     initial_step: float = 0.25
@@ -36,6 +41,7 @@ class ContinuationSettings(eqx.Module):
     max_step: float = 1.0
     max_steps: int = 500
     fast_iterations: int = 5
+    check_path_continuity: bool = True
 
 
 class ContinuationResult(eqx.Module):
@@ -69,7 +75,12 @@ def load_continuation(
         def fn(x):
             return model.residual(unravel(x), lam * loads, frames)
 
-        return solver(fn, x_guess)
+        result = solver(fn, x_guess)
+        if settings.check_path_continuity:
+            sign = jnp.linalg.slogdet(jax.jacfwd(fn)(result.x))[0]
+        else:
+            sign = jnp.ones((), dtype)
+        return result, sign
 
     def cond(c):
         return c["status"] == _RUNNING
@@ -79,8 +90,10 @@ def load_continuation(
         has_secant = c["lam"] > c["lam_prev"]
         slope = (c["x"] - c["x_prev"]) / jnp.where(has_secant, c["lam"] - c["lam_prev"], 1.0)
         guess = c["x"] + jnp.where(has_secant, lam_try - c["lam"], 0.0) * slope
-        result = newton_at(guess, lam_try)
-        ok = result.status == Status.CONVERGED
+        result, sign = newton_at(guess, lam_try)
+        converged = result.status == Status.CONVERGED
+        same_branch = sign == c["sign"]
+        ok = converged & same_branch
         fast = result.iterations <= settings.fast_iterations
         grown = jnp.minimum(jnp.where(fast, 2.0, 1.0) * c["step"], settings.max_step)
         new = dict(
@@ -94,10 +107,12 @@ def load_continuation(
             iterations=c["iterations"] + result.iterations,
             residual_norm=jnp.where(ok, result.residual_norm, c["residual_norm"]),
             status=c["status"],
+            sign=c["sign"],
         )
         done = ok & (lam_try >= 1.0)
         failed = (~ok & (new["step"] < settings.min_step)) | (new["steps"] >= settings.max_steps)
-        new["status"] = jnp.where(done, Status.CONVERGED, jnp.where(failed, Status.CONTINUATION_FAILED, _RUNNING))
+        failure = jnp.where(converged & ~same_branch, Status.CRITICAL_POINT, Status.CONTINUATION_FAILED)
+        new["status"] = jnp.where(done, Status.CONVERGED, jnp.where(failed, failure, _RUNNING))
         new["status"] = new["status"].astype(jnp.int32)
         return new
 
@@ -113,6 +128,11 @@ def load_continuation(
         residual_norm=jnp.zeros((), dtype),
         status=jnp.asarray(_RUNNING, jnp.int32),
     )
+    if settings.check_path_continuity:
+        frames0 = model.frames(state0)
+        init["sign"] = jnp.linalg.slogdet(jax.jacfwd(lambda x: model.residual(unravel(x), 0.0 * loads, frames0))(x0))[0]
+    else:
+        init["sign"] = jnp.ones((), dtype)
     out = jax.lax.while_loop(cond, body, init)
     return ContinuationResult(
         state=unravel(out["x"]),

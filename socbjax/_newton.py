@@ -30,6 +30,7 @@ class Status(enum.IntEnum):
     NONFINITE = 2
     LINE_SEARCH_FAILED = 3
     CONTINUATION_FAILED = 4
+    CRITICAL_POINT = 5
 
     @property
     def message(self) -> str:
@@ -39,6 +40,11 @@ class Status(enum.IntEnum):
             Status.NONFINITE: "the residual or Newton step became NaN/inf",
             Status.LINE_SEARCH_FAILED: "the line search could not reduce the residual (singular or ill-posed system)",
             Status.CONTINUATION_FAILED: "load continuation cut the step below its minimum without converging",
+            Status.CRITICAL_POINT: (
+                "the load path reaches a critical point (limit load or bifurcation: the tangent stiffness "
+                "turns singular), beyond which no equilibrium continues this path under load control; "
+                "add a small imperfection load, or stop below the critical load"
+            ),
         }[self]
 
 
@@ -69,7 +75,7 @@ class NewtonSolver(eqx.Module):
     linear_solver : any square ``lineax`` solver (default dense LU).
     """
 
-    atol: float = 1e-10
+    atol: float = 1e-12
     max_iterations: int = 40
     max_backtracks: int = 16
     linear_solver: lx.AbstractLinearSolver = lx.LU()

@@ -192,7 +192,8 @@ def solve(
     forces : {node index: force vector (pN)} (negative indices allowed) or array [N, d].
     model : "socb" (the SOCB method) or "jointed" (the Eq. 4 baseline).
     quadrature_order : Gauss–Legendre points per segment for Eqs 7 and 9 (SOCB only).
-    solver : Newton settings (:class:`NewtonSolver`); default atol 1e-10.
+    solver : Newton settings (:class:`NewtonSolver`); default atol 1e-12 on the
+        dimensionless residual.
     continuation : load-ramp settings (:class:`ContinuationSettings`).
     initial_state : a state of the same model to start from (default: the unloaded
         straight state); the load is still ramped from zero, so pass the state that is in
