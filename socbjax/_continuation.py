@@ -1,8 +1,11 @@
 """Load continuation: ramp the applied loads λ F, λ: 0 → 1, warm-starting each step.
 
-One compiled ``lax.while_loop``: each step predicts the next state by secant extrapolation
-of the last two accepted states, corrects with Newton, and on failure halves the step and
-retries from the last accepted state (automatic cut-back).  Quick convergence doubles the
+One compiled ``lax.while_loop``: each step predicts the next state along the path tangent
+dx/dλ = −J⁻¹ ∂R/∂λ (Euler predictor), corrects with Newton, and on failure halves the step
+and retries from the last accepted state (automatic cut-back).  A converged step is still
+rejected when the Newton correction is large compared with the predicted increment: then the
+path bends too sharply for the step (e.g. near the buckling load of a slightly imperfect
+column) and Newton may have landed on another branch.  Quick convergence doubles the
 step.  A step is also rejected when the sign of det J changes between the last accepted state
 and the new one: along a load path det J vanishes only at a critical point (limit load or
 bifurcation), so a sign change means Newton jumped to another branch (typically the unstable
@@ -33,6 +36,9 @@ class ContinuationSettings(eqx.Module):
     initial_step : first increment of λ.   min_step : smallest increment before giving up.
     max_step : largest increment.          max_steps : cap on attempted steps.
     fast_iterations : a step converging in at most this many iterations doubles the next.
+    max_corrector_ratio : reject a step whose Newton correction of the node positions exceeds
+        this fraction of the tangent predictor's position increment (the path turned too
+        sharply for the step size).
     check_path_continuity : reject steps across which sign(det J) changes (see module doc).
     """
 
@@ -41,6 +47,7 @@ class ContinuationSettings(eqx.Module):
     max_step: float = 1.0
     max_steps: int = 500
     fast_iterations: int = 5
+    max_corrector_ratio: float = 0.5
     check_path_continuity: bool = True
 
 
@@ -68,59 +75,67 @@ def load_continuation(
     ``state0`` (a solution at λ = 0).  Jit-compatible; see module docstring."""
     x0, unravel = ravel_pytree(state0)
     dtype = x0.dtype
+    # Step acceptance compares geometric (node position) changes only: forces and moments
+    # grow with λ on any path and would hide a jump between branches.
+    geometry = ravel_pytree(
+        eqx.tree_at(lambda s: s.positions, jax.tree_util.tree_map(jnp.zeros_like, state0), jnp.ones_like(state0.positions))
+    )[0]
 
-    def newton_at(x_guess, lam):
-        frames = model.frames(unravel(x_guess))
+    def residual_fn(lam, frames):
+        return lambda x: model.residual(unravel(x), lam * loads, frames)
 
-        def fn(x):
-            return model.residual(unravel(x), lam * loads, frames)
-
-        result = solver(fn, x_guess)
-        if settings.check_path_continuity:
-            sign = jnp.linalg.slogdet(jax.jacfwd(fn)(result.x))[0]
-        else:
-            sign = jnp.ones((), dtype)
-        return result, sign
+    def analyse(x, lam):
+        """sign(det J) and the path tangent dx/dλ = −J⁻¹ ∂R/∂λ at an equilibrium x."""
+        frames = model.frames(unravel(x))
+        jac = jax.jacfwd(residual_fn(lam, frames))(x)
+        _, dr_dlam = jax.jvp(lambda l: model.residual(unravel(x), l * loads, frames), (lam,), (jnp.ones_like(lam),))
+        tangent = -jnp.linalg.solve(jac, dr_dlam)
+        sign = jnp.linalg.slogdet(jac)[0] if settings.check_path_continuity else jnp.ones((), dtype)
+        return sign, jnp.where(jnp.all(jnp.isfinite(tangent)), tangent, 0.0)
 
     def cond(c):
         return c["status"] == _RUNNING
 
     def body(c):
         lam_try = jnp.minimum(c["lam"] + c["step"], 1.0)
-        has_secant = c["lam"] > c["lam_prev"]
-        slope = (c["x"] - c["x_prev"]) / jnp.where(has_secant, c["lam"] - c["lam_prev"], 1.0)
-        guess = c["x"] + jnp.where(has_secant, lam_try - c["lam"], 0.0) * slope
-        result, sign = newton_at(guess, lam_try)
+        guess = c["x"] + (lam_try - c["lam"]) * c["tangent"]
+        frames = model.frames(unravel(guess))
+        result = solver(residual_fn(lam_try, frames), guess)
         converged = result.status == Status.CONVERGED
+        sign, tangent = analyse(result.x, lam_try)
         same_branch = sign == c["sign"]
-        ok = converged & same_branch
+        predicted = jnp.linalg.norm(geometry * (guess - c["x"]))
+        corrected = jnp.linalg.norm(geometry * (result.x - guess))
+        size = jnp.linalg.norm(geometry * c["x"])
+        smooth = corrected <= settings.max_corrector_ratio * predicted + 1e-9 * (1.0 + size)
+        ok = converged & same_branch & smooth
         fast = result.iterations <= settings.fast_iterations
         grown = jnp.minimum(jnp.where(fast, 2.0, 1.0) * c["step"], settings.max_step)
         new = dict(
             x=jnp.where(ok, result.x, c["x"]),
-            x_prev=jnp.where(ok, c["x"], c["x_prev"]),
+            tangent=jnp.where(ok, tangent, c["tangent"]),
+            sign=c["sign"],
             lam=jnp.where(ok, lam_try, c["lam"]),
-            lam_prev=jnp.where(ok, c["lam"], c["lam_prev"]),
             step=jnp.where(ok, grown, 0.5 * c["step"]),
             steps=c["steps"] + 1,
             cutbacks=c["cutbacks"] + jnp.where(ok, 0, 1),
             iterations=c["iterations"] + result.iterations,
             residual_norm=jnp.where(ok, result.residual_norm, c["residual_norm"]),
-            status=c["status"],
-            sign=c["sign"],
         )
         done = ok & (lam_try >= 1.0)
         failed = (~ok & (new["step"] < settings.min_step)) | (new["steps"] >= settings.max_steps)
         failure = jnp.where(converged & ~same_branch, Status.CRITICAL_POINT, Status.CONTINUATION_FAILED)
-        new["status"] = jnp.where(done, Status.CONVERGED, jnp.where(failed, failure, _RUNNING))
-        new["status"] = new["status"].astype(jnp.int32)
+        status = jnp.where(done, Status.CONVERGED, jnp.where(failed, failure, _RUNNING))
+        new["status"] = status.astype(jnp.int32)
         return new
 
+    lam0 = jnp.zeros((), dtype)
+    sign0, tangent0 = analyse(x0, lam0)
     init = dict(
         x=x0,
-        x_prev=x0,
-        lam=jnp.zeros((), dtype),
-        lam_prev=jnp.zeros((), dtype),
+        tangent=tangent0,
+        sign=sign0,
+        lam=lam0,
         step=jnp.asarray(settings.initial_step, dtype),
         steps=jnp.zeros((), jnp.int32),
         cutbacks=jnp.zeros((), jnp.int32),
@@ -128,11 +143,6 @@ def load_continuation(
         residual_norm=jnp.zeros((), dtype),
         status=jnp.asarray(_RUNNING, jnp.int32),
     )
-    if settings.check_path_continuity:
-        frames0 = model.frames(state0)
-        init["sign"] = jnp.linalg.slogdet(jax.jacfwd(lambda x: model.residual(unravel(x), 0.0 * loads, frames0))(x0))[0]
-    else:
-        init["sign"] = jnp.ones((), dtype)
     out = jax.lax.while_loop(cond, body, init)
     return ContinuationResult(
         state=unravel(out["x"]),

@@ -1,0 +1,104 @@
+"""Fig. 4B of Simhadri & Chandran (2019): nodes needed for a given accuracy vs % deflection.
+
+The planar unit cantilever (L = 1 µm, EI = 1 pN·µm²) carries a perpendicular tip force with
+P L²/EI on a geometric grid from 0.1 to 10 (10 values; ΔY/L from ~3% to ~81%).  For the
+SOCB and the jointed model the script finds the smallest node count n whose relative error
+of ΔY (against the exact elastica) is below 1%, 5% and 10%.  Every node count is a new
+compiled shape, so n is searched on the geometric grid 2, 3, 4, 5, 6, 8, 10, 13, 16, 20,
+25, 32, 40, 50, 64, 80, 100, 128, 160, 200 and the first grid value that passes is
+reported (">200" if none does); the search for a load stops once 1% is reached.
+
+Run:  PYTHONPATH=. python benchmarks/fig4b_nodes_for_accuracy.py [--quick] [--out DIR]
+Writes fig4b_nodes_for_accuracy.json / .png to benchmarks/results/ (or DIR).
+"""
+
+from __future__ import annotations
+
+import sys
+from pathlib import Path
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+
+import numpy as np  # noqa: E402
+
+import _common as C  # noqa: E402
+
+NAME = "fig4b_nodes_for_accuracy"
+GRID = [2, 3, 4, 5, 6, 8, 10, 13, 16, 20, 25, 32, 40, 50, 64, 80, 100, 128, 160, 200]
+LEVELS = (0.01, 0.05, 0.10)
+
+
+def search(model: str, load: float, exact_dY: float, grid) -> dict:
+    """Errors along the grid until the tightest level passes; first passing n per level."""
+    import socbjax as sj
+
+    tried, needed = [], {lv: None for lv in LEVELS}
+    for n in grid:
+        rec = {"n": n}
+        try:
+            sol = sj.solve(sj.cantilever(n, dim=2), {-1: [0.0, load]}, model=model, throw=True)
+            rec["err_dY"] = abs(float(sol.positions[-1, 1]) - exact_dY) / exact_dY
+        except Exception as exc:
+            rec["error"] = f"{type(exc).__name__}: {exc}"
+            print(f"  {model} P={load:.3g} n={n} FAILED: {rec['error'][:200]}")
+        tried.append(rec)
+        for lv in LEVELS:
+            if needed[lv] is None and rec.get("err_dY", np.inf) <= lv:
+                needed[lv] = n
+        if needed[min(LEVELS)] is not None:
+            break
+    return {"needed": {f"{lv:.0%}": needed[lv] for lv in LEVELS}, "tried": tried}
+
+
+def main(argv=None) -> int:
+    args = C.parse_args(__doc__, argv)
+    loads = np.array([0.3, 2.0, 8.0]) if args.quick else np.geomspace(0.1, 10.0, 10)
+    grid = [2, 3, 5, 10, 20] if args.quick else GRID
+    ref = C.exact_cantilever(loads)
+    print(f"exact ΔY/L from {ref['source']} (numpy cross-check diff {C.fmt(ref['crosscheck_max_abs_diff'], '.1e')})")
+
+    results = {"socb": [], "jointed": []}
+    with C.Timer() as total:
+        for model in results:
+            for load, dY, dX in zip(loads, ref["dY"], ref["dX"]):
+                with C.Timer() as t:
+                    rec = search(model, float(load), float(dY), grid)
+                results[model].append({"load": float(load), "exact_dY": float(dY), "exact_dX": float(dX),
+                                       "percent_deflection": 100 * float(dY), "seconds": t.seconds, **rec})
+
+    labels = [f"{lv:.0%}" for lv in LEVELS]
+    big = f">{grid[-1]}"
+    for model, rows in results.items():
+        C.print_table(
+            ["P L²/EI", "ΔY/L %", *[f"n({lb})" for lb in labels], "err at n=2", "err at last n", "s"],
+            [[C.fmt(r["load"], ".3g"), C.fmt(r["percent_deflection"], ".1f"),
+              *[r["needed"][lb] or big for lb in labels],
+              C.fmt(r["tried"][0].get("err_dY"), ".2e"), C.fmt(r["tried"][-1].get("err_dY"), ".2e") + f" (n={r['tried'][-1]['n']})",
+              C.fmt(r["seconds"], ".1f")] for r in rows],
+            title=f"{model}: smallest grid n with relative ΔY error below each level")
+    print(f"total search time {total.seconds:.1f} s")
+
+    plt = C.pyplot()
+    fig, ax = plt.subplots(figsize=(6, 4.2))
+    for model, color in (("socb", "C0"), ("jointed", "C3")):
+        for lb, style in zip(labels, ("o-", "s--", "^:")):
+            x = [r["percent_deflection"] for r in results[model]]
+            y = [r["needed"][lb] if r["needed"][lb] else np.nan for r in results[model]]
+            ax.semilogy(x, y, style, color=color, label=f"{model} ≤{lb}")
+    ax.set_xlabel("% deflection (100 ΔY/L)")
+    ax.set_ylabel("nodes needed (first passing grid value)")
+    ax.set_title("Nodes for a given ΔY accuracy (paper Fig. 4B)")
+    ax.legend(fontsize=7, ncol=2)
+    C.save_figure(fig, args.out, NAME)
+    C.write_json(args.out, NAME, args, {
+        "levels": labels, "grid": grid, "loads": loads, "exact_source": ref["source"],
+        "crosscheck_max_abs_diff": ref["crosscheck_max_abs_diff"], "results": results,
+        "total_seconds": total.seconds,
+    })
+    failed = [t for rows in results.values() for r in rows for t in r["tried"] if "error" in t]
+    return 1 if failed else 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,117 @@
+"""Wall time of one static solve with ``socbjax.solve``, after compilation.
+
+Case: unit cantilever (L = 1 µm, EI = 1 pN·µm²) with a perpendicular tip force,
+P L²/EI = 2, solved from the straight state by load continuation.  For SOCB 2D, SOCB 3D and
+jointed 2D at n = 2, 5, 10, 20, 50 nodes (quick: 2, 5; 3D only 2) it reports
+
+* the median and minimum wall time of ``sj.solve`` (full public call, including the host
+  side set-up and packaging; ``jax.block_until_ready`` on the result) over ``--repeats``
+  (≥ 7) calls after the first;
+* the median of the compiled core alone (``socbjax._solve._continuation_jit``, private);
+* compile time = first call minus median;
+* Newton iterations and continuation steps, and the degrees of freedom (size of the flat
+  state vector, ``ravel_pytree(sol.state)``).
+
+3D shapes compile slowly (~15 s each), so the 3D list is the shortest.
+
+Run:  PYTHONPATH=. python benchmarks/solve_timing.py [--quick] [--out DIR]
+Writes solve_timing.json / .png to benchmarks/results/ (or DIR).
+"""
+
+from __future__ import annotations
+
+import sys
+import time
+from pathlib import Path
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+
+import numpy as np  # noqa: E402
+
+import _common as C  # noqa: E402
+
+NAME = "solve_timing"
+LOAD = 2.0
+
+
+def time_case(model: str, dim: int, n: int, repeats: int) -> dict:
+    import jax
+    import jax.numpy as jnp
+    from jax.flatten_util import ravel_pytree
+
+    import socbjax as sj
+    from socbjax import _solve
+
+    net = sj.cantilever(n, dim=dim)
+    force = [0.0, LOAD] + [0.0] * (dim - 2)
+
+    def call():
+        t0 = time.perf_counter()
+        sol = sj.solve(net, {-1: force}, model=model, throw=True)
+        jax.block_until_ready(sol.positions)
+        return time.perf_counter() - t0, sol
+
+    first, sol = call()
+    times = [call()[0] for _ in range(repeats)]
+    rec = {"model": model, "dim": dim, "n": n, "first_call_s": first, "median_s": float(np.median(times)),
+           "min_s": float(np.min(times)), "times_s": times, "compile_s": first - float(np.median(times)),
+           "iterations": int(sol.iterations), "steps": int(sol.steps), "cutbacks": int(sol.cutbacks),
+           "dof": int(ravel_pytree(sol.state)[0].size), "converged": sol.converged}
+    try:  # compiled core only (private API): no host-side set-up or packaging
+        disc = sj.make_model(net, model)
+        loads = jnp.asarray(sj.forces_array(net, {-1: force}))
+        args = (disc, loads, disc.initial_state(), sj.NewtonSolver(), sj.ContinuationSettings())
+        core = []
+        for _ in range(repeats):
+            t0 = time.perf_counter()
+            jax.block_until_ready(_solve._continuation_jit(*args).state)
+            core.append(time.perf_counter() - t0)
+        rec["core_median_s"] = float(np.median(core))
+    except Exception as exc:
+        rec["core_error"] = f"{type(exc).__name__}: {exc}"
+    return rec
+
+
+def main(argv=None) -> int:
+    args = C.parse_args(__doc__, argv)
+    repeats = 7 if args.quick else 9
+    ns = [2, 5] if args.quick else [2, 5, 10, 20, 50]
+    cases = [("socb", 2, ns), ("jointed", 2, ns), ("socb", 3, [2] if args.quick else ns)]
+    results = []
+    for model, dim, case_ns in cases:
+        for n in case_ns:
+            try:
+                rec = time_case(model, dim, n, repeats)
+            except Exception as exc:
+                rec = {"model": model, "dim": dim, "n": n, "error": f"{type(exc).__name__}: {exc}"}
+                print(f"  {model} {dim}D n={n} FAILED: {rec['error'][:200]}")
+            results.append(rec)
+            print(f"  done {model} {dim}D n={n}", flush=True)
+
+    ms = lambda v: C.fmt(None if v is None else 1e3 * v, ".3g")  # noqa: E731
+    C.print_table(
+        ["model", "dim", "n", "dof", "median ms", "min ms", "core ms", "compile s", "Newton it", "steps", "cutbacks"],
+        [[r["model"], r["dim"], r["n"], r.get("dof"), ms(r.get("median_s")), ms(r.get("min_s")),
+          ms(r.get("core_median_s")), C.fmt(r.get("compile_s"), ".2f"), r.get("iterations", r.get("error", "")),
+          r.get("steps"), r.get("cutbacks")] for r in results],
+        title=f"static solve, cantilever P L²/EI = {LOAD}, {repeats} repeats after the first call")
+
+    plt = C.pyplot()
+    fig, ax = plt.subplots(figsize=(6, 4.2))
+    for (model, dim, _), color in zip(cases, ("C0", "C3", "C2")):
+        ok = [r for r in results if r["model"] == model and r["dim"] == dim and "median_s" in r]
+        ax.loglog([r["dof"] for r in ok], [1e3 * r["median_s"] for r in ok], "o-", color=color, label=f"{model} {dim}D")
+        for r in ok:
+            ax.annotate(f"n={r['n']}", (r["dof"], 1e3 * r["median_s"]), fontsize=6)
+    ax.set_xlabel("degrees of freedom")
+    ax.set_ylabel("median wall time per solve (ms)")
+    ax.set_title(f"socbjax.solve, cantilever P L²/EI = {LOAD}")
+    ax.legend(fontsize=8)
+    C.save_figure(fig, args.out, NAME)
+    C.write_json(args.out, NAME, args, {"load_parameter": LOAD, "repeats": repeats, "results": results})
+    return 1 if any("error" in r for r in results) else 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
