@@ -80,8 +80,8 @@ def socb_frames(state: SOCBState, network: Network) -> Float[Array, "S 2 3"]:
 
 
 def net_nodal_force(forces: Float[Array, "S d"], network: Network, loads: Float[Array, "N d"]) -> Float[Array, "N d"]:
-    """Σ_{ending} n − Σ_{starting} n − F at each node (pN): zero at free nodes, minus the
-    support reaction at supported ones."""
+    """Σ_{ending} n − Σ_{starting} n − F at each node (pN): zero at free nodes, and the
+    reaction force that the support exerts on the node at supported ones."""
     n_nodes = network.n_nodes
     ending = jax.ops.segment_sum(forces, network.segments[:, 1], num_segments=n_nodes)
     starting = jax.ops.segment_sum(forces, network.segments[:, 0], num_segments=n_nodes)

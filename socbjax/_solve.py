@@ -152,7 +152,7 @@ def _package(model, name, result, loads) -> Solution:
     else:
         angles = jnp.stack([jnp.arctan2(tangents[:, 1], tangents[:, 0]), jnp.arcsin(jnp.clip(tangents[:, 2], -1, 1))], axis=-1)
         curvatures = moments / EI[:, None]
-    reactions = -net_nodal_force(state.forces, net, result.load_factor * loads)
+    reactions = net_nodal_force(state.forces, net, result.load_factor * loads)  # external force the support applies
     reactions = jnp.einsum("nij,nj->ni", net.position_projector, reactions)
     return Solution(
         positions=state.positions,

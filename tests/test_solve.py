@@ -1,0 +1,85 @@
+"""The public solve API: loads, results, statuses, loud failures."""
+
+import numpy as np
+import pytest
+
+import socbjax as sj
+
+
+@pytest.fixture(scope="module")
+def net2():
+    return sj.cantilever(3, dim=2)
+
+
+def test_negative_index_equals_positive(net2):
+    a = sj.solve(net2, {-1: [0.0, 1.0]})
+    b = sj.solve(net2, {2: [0.0, 1.0]})
+    np.testing.assert_allclose(a.positions, b.positions, atol=1e-14)
+
+
+def test_array_forces_equal_dict_forces(net2):
+    arr = np.zeros((3, 2))
+    arr[-1] = [0.3, 1.0]
+    np.testing.assert_allclose(sj.solve(net2, arr).positions, sj.solve(net2, {-1: [0.3, 1.0]}).positions, atol=1e-14)
+
+
+def test_solution_fields(net2):
+    sol = sj.solve(net2, {-1: [0.0, 1.0]})
+    assert sol.converged and sol.status == sj.Status.CONVERGED
+    assert sol.positions.shape == (3, 2) and sol.angles.shape == (3,) and sol.curvatures.shape == (3,)
+    assert float(sol.residual_norm) <= 1e-12 and float(sol.load_factor) == 1.0
+    # free end: zero curvature; clamp: reaction balances the load; base moment = r_tip × F
+    assert abs(float(sol.curvatures[-1])) < 1e-10
+    np.testing.assert_allclose(sol.reactions[0], [0.0, -1.0], atol=1e-10)
+    tip = np.asarray(sol.positions[-1])
+    assert abs(float(sol.moments[0]) - tip[0] * 1.0) < 1e-10
+    assert "converged=True" in repr(sol)
+
+
+def test_force_scales_with_EI():
+    """Same shape when force and EI scale together (units: pN and pN·µm²)."""
+    a = sj.solve(sj.cantilever(4, dim=2), {-1: [0.0, 2.0]})
+    b = sj.solve(sj.cantilever(4, dim=2, EI=0.071), {-1: [0.0, 2.0 * 0.071]})
+    np.testing.assert_allclose(a.positions, b.positions, atol=1e-12)
+    np.testing.assert_allclose(np.asarray(b.moments), 0.071 * np.asarray(a.moments), atol=1e-12)
+
+
+@pytest.mark.parametrize(
+    "forces, match",
+    [
+        ({5: [0.0, 1.0]}, "node 5"),
+        ({-4: [0.0, 1.0]}, "node -4"),
+        ({-1: [0.0, 1.0, 0.0]}, "2 components"),
+        ({-1: [0.0, float("nan")]}, "NaN"),
+        ({-1: [float("inf"), 0.0]}, "NaN or infinite"),
+        (np.zeros((2, 2)), "shape"),
+    ],
+)
+def test_bad_forces(net2, forces, match):
+    with pytest.raises(ValueError, match=match):
+        sj.solve(net2, forces)
+
+
+def test_bad_model_and_network(net2):
+    with pytest.raises(ValueError, match="unknown model"):
+        sj.solve(net2, {-1: [0.0, 1.0]}, model="fem")
+    with pytest.raises(TypeError, match="Network"):
+        sj.solve("not a network", {-1: [0.0, 1.0]})
+
+
+def test_perfect_column_past_buckling_fails_loudly():
+    """Axial load beyond π²/4 on a perfect column: no equilibrium continues the path."""
+    net = sj.column(3, dim=2)
+    with pytest.raises(sj.ConvergenceError, match="critical point"):
+        sj.solve(net, {-1: [-3.0, 0.0]})
+    sol = sj.solve(net, {-1: [-3.0, 0.0]}, throw=False)
+    assert not sol.converged and sol.status == sj.Status.CRITICAL_POINT
+    assert 0.0 < float(sol.load_factor) < 1.0
+    assert float(sol.load_factor) * 3.0 <= np.pi**2 / 4 * 1.001
+    assert np.all(np.isfinite(np.asarray(sol.positions)))
+
+
+def test_below_buckling_perfect_column_stays_straight():
+    sol = sj.solve(sj.column(3, dim=2), {-1: [-2.0, 0.0]})
+    np.testing.assert_allclose(sol.positions[:, 1], 0.0, atol=1e-12)
+    np.testing.assert_allclose(sol.segment_forces, [[-2.0, 0.0]] * 2, atol=1e-12)
