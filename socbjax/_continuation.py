@@ -84,10 +84,9 @@ def load_continuation(
     def residual_fn(lam, frames):
         return lambda x: model.residual(unravel(x), lam * loads, frames)
 
-    def analyse(x, lam):
-        """sign(det J) and the path tangent dx/dλ = −J⁻¹ ∂R/∂λ at an equilibrium x."""
-        frames = model.frames(unravel(x))
-        jac = jax.jacfwd(residual_fn(lam, frames))(x)
+    def analyse(x, lam, frames, jac):
+        """sign(det J) and the path tangent dx/dλ = −J⁻¹ ∂R/∂λ near an equilibrium x (J is
+        Newton's last Jacobian, within its quadratic-convergence neighbourhood of x)."""
         _, dr_dlam = jax.jvp(lambda l: model.residual(unravel(x), l * loads, frames), (lam,), (jnp.ones_like(lam),))
         tangent = -jnp.linalg.solve(jac, dr_dlam)
         sign = jnp.linalg.slogdet(jac)[0] if settings.check_path_continuity else jnp.ones((), dtype)
@@ -97,45 +96,47 @@ def load_continuation(
         return c["status"] == _RUNNING
 
     def body(c):
-        lam_try = jnp.minimum(c["lam"] + c["step"], 1.0)
+        # The first pass solves at λ = 0 (already an equilibrium) only to get J, its
+        # determinant sign and the path tangent there: one traced Newton serves both.
+        primed = c["sign"] != 0
+        lam_try = jnp.where(primed, jnp.minimum(c["lam"] + c["step"], 1.0), c["lam"])
         guess = c["x"] + (lam_try - c["lam"]) * c["tangent"]
         frames = model.frames(unravel(guess))
         result = solver(residual_fn(lam_try, frames), guess)
         converged = result.status == Status.CONVERGED
-        sign, tangent = analyse(result.x, lam_try)
-        same_branch = sign == c["sign"]
+        sign, tangent = analyse(result.x, lam_try, frames, result.jacobian)
+        same_branch = ~primed | (sign == c["sign"])
         predicted = jnp.linalg.norm(geometry * (guess - c["x"]))
         corrected = jnp.linalg.norm(geometry * (result.x - guess))
         size = jnp.linalg.norm(geometry * c["x"])
         smooth = corrected <= settings.max_corrector_ratio * predicted + 1e-9 * (1.0 + size)
         ok = converged & same_branch & smooth
         fast = result.iterations <= settings.fast_iterations
-        grown = jnp.minimum(jnp.where(fast, 2.0, 1.0) * c["step"], settings.max_step)
+        grown = jnp.where(primed, jnp.minimum(jnp.where(fast, 2.0, 1.0) * c["step"], settings.max_step), c["step"])
         new = dict(
             x=jnp.where(ok, result.x, c["x"]),
             tangent=jnp.where(ok, tangent, c["tangent"]),
-            sign=c["sign"],
+            sign=jnp.where(primed, c["sign"], jnp.where(ok, sign, 0.0)),
             lam=jnp.where(ok, lam_try, c["lam"]),
             step=jnp.where(ok, grown, 0.5 * c["step"]),
-            steps=c["steps"] + 1,
+            steps=c["steps"] + jnp.where(primed, 1, 0),
             cutbacks=c["cutbacks"] + jnp.where(ok, 0, 1),
-            iterations=c["iterations"] + result.iterations,
+            iterations=c["iterations"] + jnp.where(primed, result.iterations, 0),
             residual_norm=jnp.where(ok, result.residual_norm, c["residual_norm"]),
         )
-        done = ok & (lam_try >= 1.0)
+        done = ok & primed & (lam_try >= 1.0)
         failed = (~ok & (new["step"] < settings.min_step)) | (new["steps"] >= settings.max_steps)
+        failed = failed | (~primed & ~ok)  # the λ = 0 state itself is not an equilibrium
         failure = jnp.where(converged & ~same_branch, Status.CRITICAL_POINT, Status.CONTINUATION_FAILED)
         status = jnp.where(done, Status.CONVERGED, jnp.where(failed, failure, _RUNNING))
         new["status"] = status.astype(jnp.int32)
         return new
 
-    lam0 = jnp.zeros((), dtype)
-    sign0, tangent0 = analyse(x0, lam0)
     init = dict(
         x=x0,
-        tangent=tangent0,
-        sign=sign0,
-        lam=lam0,
+        tangent=jnp.zeros_like(x0),
+        sign=jnp.zeros((), dtype),
+        lam=jnp.zeros((), dtype),
         step=jnp.asarray(settings.initial_step, dtype),
         steps=jnp.zeros((), jnp.int32),
         cutbacks=jnp.zeros((), jnp.int32),

@@ -58,6 +58,7 @@ class NewtonResult(eqx.Module):
     status: Int[Array, ""]
     iterations: Int[Array, ""]
     residual_norm: Float[Array, ""]
+    jacobian: Float[Array, "n n"]  # J at the last iterate where it was assembled
 
     @property
     def converged(self) -> Array:
@@ -81,16 +82,16 @@ class NewtonSolver(eqx.Module):
     linear_solver: lx.AbstractLinearSolver = lx.LU()
 
     def __call__(self, fn: Callable[[Array], Array], x0: Float[Array, " n"]) -> NewtonResult:
+        # At least one iteration is always taken, so that the returned Jacobian is that of
+        # the converged neighbourhood (continuation reuses it for its tangent and det sign).
         r0 = fn(x0)
-        norm0 = _inf_norm(r0)
-        status0 = jnp.where(norm0 <= self.atol, Status.CONVERGED, _RUNNING)
-        status0 = jnp.where(jnp.isfinite(norm0), status0, Status.NONFINITE).astype(jnp.int32)
+        status0 = jnp.where(jnp.isfinite(_inf_norm(r0)), _RUNNING, Status.NONFINITE).astype(jnp.int32)
 
         def cond(carry):
             return carry[3] == _RUNNING
 
         def body(carry):
-            x, r, iteration, _ = carry
+            x, r, iteration, _, _ = carry
             jac = jax.jacfwd(fn)(x)
             sol = lx.linear_solve(lx.MatrixLinearOperator(jac), -r, self.linear_solver, throw=False)
             step = sol.value
@@ -107,9 +108,10 @@ class NewtonSolver(eqx.Module):
                 r_new = fn(x + alpha * step)
                 return alpha, k + 1, r_new, jnp.sum(r_new * r_new)
 
-            r_full = fn(x + step)
+            # Start at α = 2 with an infinite merit: the first pass evaluates the full step, so
+            # the residual is traced once for the whole line search (compile time).
             alpha, k, r_new, new_merit = jax.lax.while_loop(
-                ls_cond, ls_body, (jnp.asarray(1.0, x.dtype), 0, r_full, jnp.sum(r_full * r_full))
+                ls_cond, ls_body, (jnp.asarray(2.0, x.dtype), -1, r, jnp.asarray(jnp.inf, x.dtype))
             )
             accepted = new_merit <= (1.0 - 1e-4 * alpha) * merit
             x_new = jnp.where(accepted, x + alpha * step, x)
@@ -120,10 +122,11 @@ class NewtonSolver(eqx.Module):
             status = jnp.where((status == _RUNNING) & ~accepted, Status.LINE_SEARCH_FAILED, status)
             status = jnp.where(jnp.all(jnp.isfinite(step)) & jnp.isfinite(norm), status, Status.NONFINITE)
             status = jnp.where((status == _RUNNING) & (iteration >= self.max_iterations), Status.MAX_ITERATIONS, status)
-            return x_new, r_new, iteration, status.astype(jnp.int32)
+            return x_new, r_new, iteration, status.astype(jnp.int32), jac
 
-        x, r, iterations, status = jax.lax.while_loop(cond, body, (x0, r0, jnp.zeros((), jnp.int32), status0))
-        return NewtonResult(x=x, status=status, iterations=iterations, residual_norm=_inf_norm(r))
+        init = (x0, r0, jnp.zeros((), jnp.int32), status0, jnp.zeros((x0.size, x0.size), x0.dtype))
+        x, r, iterations, status, jac = jax.lax.while_loop(cond, body, init)
+        return NewtonResult(x=x, status=status, iterations=iterations, residual_norm=_inf_norm(r), jacobian=jac)
 
 
 def _inf_norm(r: Array) -> Array:

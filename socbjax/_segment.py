@@ -21,7 +21,8 @@ Spatial segment (unknowns at each end: unit tangent t and moment vector m ⊥ t)
 * End jets: t' = (m × t)/EI, and from (EI t'' + n) ∥ t with t·t'' = −|t'|²:
   EI t'' = (n·t) t − n − EI |t'|² t.
 * The tangent is interpolated in the log chart at u = (t_a + t_b)/|t_a + t_b|
-  (see :mod:`socbjax._geometry`): w(s) = log_u t(s) is a quintic Hermite polynomial with
+  (see :mod:`socbjax._geometry`; the end jets (w, w', w'') follow from (t, t', t'') by the
+  closed-form chain rule of ``sphere_log_jet``): w(s) = log_u t(s) is a quintic Hermite polynomial with
   vector coefficients (Eqs 5, 6a applied component-wise in the plane ⊥ u), and
   t(s) = exp_u w(s).  This replaces the paper's spherical angles in a rotated analysis
   frame: it needs no frame, has no pole, and reduces exactly to the planar quintic when the
@@ -42,7 +43,7 @@ import jax
 import jax.numpy as jnp
 from jaxtyping import Array, Float
 
-from ._geometry import sphere_exp, sphere_exp_differential_inverse, sphere_log
+from ._geometry import sphere_exp, sphere_exp_differential_inverse, sphere_log_jet
 from ._quadrature import SegmentQuadrature
 
 __all__ = ["planar_segment_residual", "spatial_segment_residual", "spatial_segment_tangents", "planar_segment_angles"]
@@ -89,20 +90,6 @@ def planar_segment_residual(
     return jnp.concatenate([length_eq, moment_eq[None], bending_eq[None]])
 
 
-def _log_jet(u, t, dt, ddt):
-    """(w, w', w'') of w = log_u(t(s)) from the jet (t, t', t'') by nested forward mode."""
-
-    def curve(eps):
-        return sphere_log(u, t + eps * dt + 0.5 * eps**2 * ddt)
-
-    def first(eps):
-        return jax.jvp(curve, (eps,), (jnp.ones_like(eps),))
-
-    zero = jnp.zeros((), dtype=t.dtype)
-    (w, dw), (_, ddw) = jax.jvp(first, (zero,), (jnp.ones_like(zero),))
-    return w, dw, ddw
-
-
 def _end_jet(t, m, n, EI):
     t = t / jnp.linalg.norm(t)
     dt = jnp.cross(m, t) / EI
@@ -116,8 +103,8 @@ def _spatial_interpolant(t_a, m_a, t_b, m_b, n, length, EI, basis):
     t_b, dt_b, ddt_b = _end_jet(t_b, m_b, n, EI)
     u = t_a + t_b
     u = u / jnp.linalg.norm(u)
-    w_a, dw_a, ddw_a = _log_jet(u, t_a, dt_a, ddt_a)
-    w_b, dw_b, ddw_b = _log_jet(u, t_b, dt_b, ddt_b)
+    w_a, dw_a, ddw_a = sphere_log_jet(u, t_a, dt_a, ddt_a)
+    w_b, dw_b, ddw_b = sphere_log_jet(u, t_b, dt_b, ddt_b)
     data = jnp.stack([w_a, length * dw_a, length**2 * ddw_a, w_b, length * dw_b, length**2 * ddw_b])
     return u, w_a, w_b, basis @ data  # [K, 3]
 

@@ -56,3 +56,24 @@ def test_rotation_vector_angle_and_axis(rng):
     angle = 0.8
     b = np.cos(angle) * a + np.sin(angle) * np.cross(axis, a)
     np.testing.assert_allclose(rotation_vector(jnp.asarray(a), jnp.asarray(b)), angle * axis, atol=1e-14)
+
+
+@pytest.mark.parametrize("angle", [0.0, 1e-7, 0.01, 0.31, 0.33, 0.9])
+def test_log_jet_closed_form_equals_nested_forward_mode(angle, rng):
+    from socbjax._geometry import sphere_log_jet
+
+    u = _unit(rng.normal(size=3))
+    p = _unit(np.cross(u, rng.normal(size=3)))
+    t = np.cos(angle) * u + np.sin(angle) * p
+    dt, ddt = np.cross(rng.normal(size=3), t), rng.normal(size=3)
+
+    def curve(eps):
+        return sphere_log(jnp.asarray(u), jnp.asarray(t + eps * dt + 0.5 * eps**2 * ddt))
+
+    def first(eps):
+        return jax.jvp(curve, (eps,), (1.0,))
+
+    (w, dw), (_, ddw) = jax.jvp(first, (0.0,), (1.0,))
+    closed = sphere_log_jet(jnp.asarray(u), jnp.asarray(t), jnp.asarray(dt), jnp.asarray(ddt))
+    for a, b in zip(closed, (w, dw, ddw)):
+        np.testing.assert_allclose(a, b, atol=1e-13)
