@@ -6,6 +6,11 @@ The ground truth comes from ``socbjax._reference`` (diffrax shooting) when it im
 works; otherwise from :func:`shoot_cantilever_numpy`, an independent numpy shooting solver
 (fixed-step RK4 from the free tip back to the clamp, Newton on the tip angle).  Both are
 computed when possible and their difference is recorded as a cross-check.
+
+Importing this module sets ``OPENBLAS_NUM_THREADS=1`` unless it is already set: numpy and
+jaxlib's CPU LU/eigen kernels use OpenBLAS, and on small machines its threads fight XLA's
+own thread pool, making dense solves of ~200 unknowns 10-50x slower and erratic.  Import
+``_common`` before numpy (the benchmark scripts do).
 """
 
 from __future__ import annotations
@@ -19,7 +24,9 @@ import sys
 import time
 from pathlib import Path
 
-import numpy as np
+os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")  # before numpy/jax load OpenBLAS
+
+import numpy as np  # noqa: E402
 
 RESULTS = Path(__file__).resolve().parent / "results"
 
@@ -45,6 +52,8 @@ def machine_info() -> dict:
         "jax": jax.__version__,
         "jax_backend": jax.default_backend(),
         "jax_devices": [str(d) for d in jax.devices()],
+        "OPENBLAS_NUM_THREADS": os.environ.get("OPENBLAS_NUM_THREADS"),
+        "XLA_FLAGS": os.environ.get("XLA_FLAGS"),
         "date": datetime.datetime.now(datetime.timezone.utc).isoformat(timespec="seconds"),
     }
 

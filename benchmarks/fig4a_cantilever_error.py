@@ -25,9 +25,8 @@ from pathlib import Path
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
+import _common as C  # noqa: E402  (first: sets OPENBLAS_NUM_THREADS before numpy loads)
 import numpy as np  # noqa: E402
-
-import _common as C  # noqa: E402
 
 NAME = "fig4a_cantilever_error"
 LOAD = 2.0  # P L²/EI

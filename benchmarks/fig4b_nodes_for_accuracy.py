@@ -20,9 +20,8 @@ from pathlib import Path
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
+import _common as C  # noqa: E402  (first: sets OPENBLAS_NUM_THREADS before numpy loads)
 import numpy as np  # noqa: E402
-
-import _common as C  # noqa: E402
 
 NAME = "fig4b_nodes_for_accuracy"
 GRID = [2, 3, 4, 5, 6, 8, 10, 13, 16, 20, 25, 32, 40, 50, 64, 80, 100, 128, 160, 200]
@@ -86,6 +85,9 @@ def main(argv=None) -> int:
             x = [r["percent_deflection"] for r in results[model]]
             y = [r["needed"][lb] if r["needed"][lb] else np.nan for r in results[model]]
             ax.semilogy(x, y, style, color=color, label=f"{model} ≤{lb}")
+    used = sorted({v for m in results.values() for r in m for v in r["needed"].values() if v})
+    ax.set_yticks(used, [str(v) for v in used], minor=False)
+    ax.set_yticks([], minor=True)
     ax.set_xlabel("% deflection (100 ΔY/L)")
     ax.set_ylabel("nodes needed (first passing grid value)")
     ax.set_title("Nodes for a given ΔY accuracy (paper Fig. 4B)")

@@ -28,9 +28,8 @@ from pathlib import Path
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
+import _common as C  # noqa: E402  (first: sets OPENBLAS_NUM_THREADS before numpy loads)
 import numpy as np  # noqa: E402
-
-import _common as C  # noqa: E402
 
 NAME = "fig5c_buckling_error"
 
@@ -101,6 +100,9 @@ def main(argv=None) -> int:
             ax.loglog([r["n"] for r in ok], [max(abs(r["rel_error"]), 1e-16) for r in ok], style, color=f"C{i}",
                       mfc="none" if model == "jointed" else None, label=f"{model} {supports[0]}-{supports[1]}")
     ax.axhline(0.01, color="gray", lw=0.8, ls=":")
+    ticks = sorted(set(socb_ns[::2] + jointed_ns))
+    ax.set_xticks(ticks, [str(t) for t in ticks], minor=False)
+    ax.set_xticks([], minor=True)
     ax.set_xlabel("number of nodes n")
     ax.set_ylabel("|relative error of P_cr|")
     ax.set_title("Critical axial load error (paper Fig. 5C)")

@@ -12,7 +12,9 @@ jointed 2D at n = 2, 5, 10, 20, 50 nodes (quick: 2, 5; 3D only 2) it reports
 * Newton iterations and continuation steps, and the degrees of freedom (size of the flat
   state vector, ``ravel_pytree(sol.state)``).
 
-3D shapes compile slowly (~15 s each), so the 3D list is the shortest.
+3D shapes compile slowly (~30-40 s each here), so quick mode runs 3D at n = 2 only.
+``_common`` sets OPENBLAS_NUM_THREADS=1 (unless set): with threaded OpenBLAS on a 2-CPU
+machine the dense LU inside Newton was 10-50x slower and erratic from ~200 unknowns on.
 
 Run:  PYTHONPATH=. python benchmarks/solve_timing.py [--quick] [--out DIR]
 Writes solve_timing.json / .png to benchmarks/results/ (or DIR).
@@ -27,9 +29,8 @@ from pathlib import Path
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
+import _common as C  # noqa: E402  (first: sets OPENBLAS_NUM_THREADS before numpy loads)
 import numpy as np  # noqa: E402
-
-import _common as C  # noqa: E402
 
 NAME = "solve_timing"
 LOAD = 2.0

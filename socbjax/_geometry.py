@@ -29,7 +29,7 @@ __all__ = [
 _SMALL = 1e-2  # squared-angle threshold below which Taylor series are used (error < 1e-16)
 
 # Taylor coefficients in q = ρ² (computed with sympy; see module docstring).
-_ATAN_OVER = (1.0, -1 / 3, 1 / 5, -1 / 7, 1 / 9, -1 / 11, 1 / 13)  # atan(ρ)/ρ
+_ATAN_OVER = tuple((-1.0) ** k / (2 * k + 1) for k in range(24))  # atan(ρ)/ρ in q = ρ²
 _COS = (1.0, -1 / 2, 1 / 24, -1 / 720, 1 / 40320, -1 / 3628800, 1 / 479001600)
 _SINC = (1.0, -1 / 6, 1 / 120, -1 / 5040, 1 / 362880, -1 / 39916800, 1 / 6227020800)
 # h(ρ) = (ρ/sin ρ − 1/cos ρ)/ρ²
@@ -125,7 +125,7 @@ def orthonormal_complement(u: Float[Array, "3"]) -> Float[Array, "2 3"]:
 
 
 _JET_SMALL = 0.1  # q threshold for the series of G, G', G'' below (truncation < 1e-17)
-_G = tuple((-1.0) ** k / (2 * k + 1) for k in range(24))  # atan(√q)/√q = Σ a_k q^k
+_G = _ATAN_OVER  # atan(√q)/√q = Σ a_k q^k
 _G1 = tuple(k * _G[k] for k in range(1, 24))
 _G2 = tuple(k * (k - 1) * _G[k] for k in range(2, 24))
 

@@ -28,7 +28,7 @@ from jaxtyping import Array, Float
 
 from ._geometry import orthonormal_complement, rotation_vector
 from ._network import Network
-from ._residual import _support_rows, net_nodal_force, reference_scales
+from ._residual import _support_rows, net_nodal_force
 
 __all__ = ["JointedState", "JointedModel", "joint_moments"]
 
@@ -93,7 +93,6 @@ class JointedModel(eqx.Module):
 
     def residual(self, state: JointedState, loads, frames) -> Float[Array, " R"]:
         net = self.network
-        length_ref, EI_ref, _ = reference_scales(net)
         a, b = net.segments[:, 0], net.segments[:, 1]
         r = state.positions
         d = _unit(net, state.directions)
@@ -112,5 +111,4 @@ class JointedModel(eqx.Module):
             seg = jnp.concatenate([length_eq, moment_eq, norm_eq[:, None]], axis=1)
         imbalance = net_nodal_force(n, net, loads)
         support = _support_rows(r, imbalance, net)
-        del length_ref, EI_ref
         return jnp.concatenate([seg.ravel(), support.ravel()[net.jointed_rows]])

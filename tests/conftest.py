@@ -1,6 +1,12 @@
 """Shared fixtures. float64 is enabled here (socbjax also enables it on import)."""
 
-import jax
+import os
+
+# OpenBLAS's own threads oversubscribe 2-core machines and slow dense solves 10-50x
+# (measured in benchmarks/); must be set before numpy/jaxlib load it.
+os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
+
+import jax  # noqa: E402
 
 jax.config.update("jax_enable_x64", True)
 
