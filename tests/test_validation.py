@@ -134,3 +134,13 @@ def test_post_buckling_follows_the_elastica(overload):
     m0 = float(sol.moments[0])  # picks the branch; the reference then converges on its own
     exact = exact_tip_displacement(*force, guess=m0)
     assert relative_error(d, exact) < 1e-3
+
+
+def test_quadrature_order_is_configurable_and_converged_at_default():
+    exact = exact_tip_displacement(0.0, 2.0)
+    errors = {
+        order: relative_error(tip_displacement(sj.solve(sj.cantilever(3, dim=2), {-1: [0.0, 2.0]}, quadrature_order=order)), exact)
+        for order in (2, 8, 12)
+    }
+    assert errors[2] > 10 * errors[8]  # too few points: quadrature error dominates
+    assert abs(errors[12] - errors[8]) < 1e-3 * errors[8]  # order 8 is converged: discretisation error remains
