@@ -5,14 +5,15 @@ dx/dλ = −J⁻¹ ∂R/∂λ (Euler predictor), corrects with Newton, and on fa
 and retries from the last accepted state (automatic cut-back).  A converged step is still
 rejected when the Newton correction is large compared with the predicted increment: then the
 path bends too sharply for the step (e.g. near the buckling load of a slightly imperfect
-column) and Newton may have landed on another branch.  Quick convergence doubles the
-step.  A step is also rejected when the sign of det J changes between the last accepted state
-and the new one: along a load path det J vanishes only at a critical point (limit load or
-bifurcation), so a sign change means Newton jumped to another branch (typically the unstable
-near-straight branch just past buckling) rather than following the path.  If steps are cut to
-``min_step`` for that reason the run stops with ``Status.CRITICAL_POINT``.  If the step falls below ``min_step`` the run stops with
-``Status.CONTINUATION_FAILED`` and returns the last *accepted* state and its load factor:
-never a state that did not converge.
+column) and Newton may have landed on another branch.  A step is also rejected when the
+sign of det J changes between the last accepted state and the new one: along a load path
+det J vanishes only at a critical point (limit load or bifurcation), so a sign change means
+Newton jumped to another branch (typically the unstable near-straight branch just past
+buckling).  Quick convergence doubles the step.
+
+If the step falls below ``min_step`` the run stops with ``Status.CRITICAL_POINT`` (the last
+rejection was a determinant sign change) or ``Status.CONTINUATION_FAILED`` (otherwise), and
+returns the last *accepted* state and its load factor: never a state that did not converge.
 """
 
 from __future__ import annotations

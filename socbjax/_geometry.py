@@ -17,7 +17,6 @@ import jax.numpy as jnp
 from jaxtyping import Array, Float
 
 __all__ = [
-    "cross",
     "sphere_log",
     "sphere_log_jet",
     "sphere_exp",
@@ -58,9 +57,9 @@ def _even_function(q: Array, direct, coeffs: tuple[float, ...]) -> Array:
     return jnp.where(small, _series(coeffs, q), direct(jnp.sqrt(q_safe)))
 
 
-def cross(a: Array, b: Array) -> Array:
-    """Cross product of 3-vectors (last axis)."""
-    return jnp.cross(a, b)
+def _angle_over_sine(s_squared: Array, c: Array) -> Array:
+    """atan2(s, c)/s for c > 0 given s² (the angle over its sine-length), smooth at s = 0."""
+    return _even_function(s_squared / (c * c), lambda r: jnp.arctan(r) / r, _ATAN_OVER) / c
 
 
 def sphere_log(u: Float[Array, "3"], t: Float[Array, "3"]) -> Float[Array, "3"]:
@@ -72,10 +71,7 @@ def sphere_log(u: Float[Array, "3"], t: Float[Array, "3"]) -> Float[Array, "3"]:
     """
     c = jnp.dot(u, t)
     x = t - c * u
-    q = jnp.dot(x, x) / (c * c)  # tan² of the angle
-    # angle / |x| = atan(√q)/√q / c
-    factor = _even_function(q, lambda r: jnp.arctan(r) / r, _ATAN_OVER) / c
-    return factor * x
+    return _angle_over_sine(jnp.dot(x, x), c) * x
 
 
 def sphere_exp(u: Float[Array, "3"], w: Float[Array, "3"]) -> Float[Array, "3"]:
@@ -104,11 +100,8 @@ def sphere_exp_differential_inverse(
 
 def rotation_vector(a: Float[Array, "3"], b: Float[Array, "3"]) -> Float[Array, "3"]:
     """Rotation vector (angle × unit axis) of the smallest rotation taking direction a to b."""
-    c = jnp.dot(a, b)
     axb = jnp.cross(a, b)
-    q = jnp.dot(axb, axb) / (c * c)
-    factor = _even_function(q, lambda r: jnp.arctan(r) / r, _ATAN_OVER) / c
-    return factor * axb
+    return _angle_over_sine(jnp.dot(axb, axb), jnp.dot(a, b)) * axb
 
 
 def orthonormal_complement(u: Float[Array, "3"]) -> Float[Array, "2 3"]:

@@ -111,4 +111,4 @@ class JointedModel(eqx.Module):
             seg = jnp.concatenate([length_eq, moment_eq, norm_eq[:, None]], axis=1)
         imbalance = net_nodal_force(n, net, loads)
         support = _support_rows(r, imbalance, net)
-        return jnp.concatenate([seg.ravel(), support.ravel()[net.jointed_rows]])
+        return jnp.concatenate([seg.ravel(), support.ravel()])

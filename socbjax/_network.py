@@ -44,7 +44,8 @@ class Network(eqx.Module):
     position_projector : [N, d, d] projector onto prescribed position directions.
     clamped : [N] bool, tangent prescribed.
     moment_free : [N] bool, bending moment prescribed zero (free or pinned end).
-    socb_rows, jointed_rows : int arrays selecting the node equations of each model.
+    socb_rows : int array selecting the SOCB node equations (the jointed model uses all
+        force/position rows, so it needs no selection).
     dim : 2 or 3 (static).
     """
 
@@ -57,7 +58,6 @@ class Network(eqx.Module):
     clamped: Bool[Array, " N"]
     moment_free: Bool[Array, " N"]
     socb_rows: Int[Array, " R"]
-    jointed_rows: Int[Array, " Q"]
     dim: int = eqx.field(static=True)
 
     @property
@@ -77,7 +77,6 @@ class Network(eqx.Module):
 # Candidate node equations, per node, in a fixed order (see _residual / _jointed):
 #   2D SOCB:    force/position (2) | clamp θ (1) | zero moment (1)                 -> 4
 #   3D SOCB:    force/position (3) | |t|=1 (1) | clamp t (3) | m·t=0 (1) | m=0 (3) -> 11
-#   jointed:    force/position (d)                                                 -> d
 def _socb_rows(dim: int, clamped: np.ndarray, moment_free: np.ndarray) -> np.ndarray:
     rows = []
     width = 4 if dim == 2 else 11
@@ -153,6 +152,5 @@ def make_network(
         clamped=jnp.asarray(clamped),
         moment_free=jnp.asarray(moment_free),
         socb_rows=jnp.asarray(_socb_rows(dim, clamped, moment_free)),
-        jointed_rows=jnp.asarray(np.arange(n * dim, dtype=np.int32)),
         dim=dim,
     )
