@@ -31,6 +31,7 @@ class Status(enum.IntEnum):
     LINE_SEARCH_FAILED = 3
     CONTINUATION_FAILED = 4
     CRITICAL_POINT = 5
+    MAX_STEPS = 6
 
     @property
     def message(self) -> str:
@@ -43,8 +44,10 @@ class Status(enum.IntEnum):
             Status.CRITICAL_POINT: (
                 "the load path reaches a critical point (limit load or bifurcation: the tangent stiffness "
                 "turns singular), beyond which no equilibrium continues this path under load control; "
-                "add a small imperfection load, or stop below the critical load"
+                "add a small imperfection load, or stop below the critical load; under displacement "
+                "control use method='arclength' to follow the path through folds"
             ),
+            Status.MAX_STEPS: "the continuation used up its step budget (PathSettings.max_steps / max_attempts)",
         }[self]
 
 

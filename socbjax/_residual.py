@@ -33,7 +33,15 @@ from ._network import Network
 from ._quadrature import SegmentQuadrature
 from ._segment import planar_segment_residual, spatial_segment_residual
 
-__all__ = ["SOCBState", "socb_initial_state", "socb_residual", "socb_frames", "net_nodal_force", "reference_scales"]
+__all__ = [
+    "SOCBState",
+    "socb_initial_state",
+    "socb_residual",
+    "socb_frames",
+    "net_nodal_force",
+    "routed_nodal_force",
+    "reference_scales",
+]
 
 
 class SOCBState(eqx.Module):
@@ -88,14 +96,68 @@ def net_nodal_force(forces: Float[Array, "S d"], network: Network, loads: Float[
     return ending - starting - loads
 
 
-def _support_rows(state_positions, imbalance, network: Network):
+def routed_nodal_force(forces, network: Network, loads) -> Float[Array, "N d"]:
+    """:func:`net_nodal_force` with each daughter base's share moved to its mother node, so
+    that a junction balances all three segment ends at once (zero at daughter bases)."""
+    imbalance = net_nodal_force(forces, network, loads)
+    return jax.ops.segment_sum(imbalance, network.attach, num_segments=network.n_nodes)
+
+
+def _unit(v):
+    return v / jnp.linalg.norm(v, axis=-1, keepdims=True)
+
+
+def _transport(a, b, v):
+    """Minimal rotation taking unit a to unit b (about a × b), applied to v.  Singular only
+    for b = −a (a mother tangent reversed by 180° at a junction)."""
+    ab = a + b
+    return v + 2.0 * jnp.sum(a * v, -1, keepdims=True) * b - jnp.sum(ab * v, -1, keepdims=True) / (
+        1.0 + jnp.sum(a * b, -1, keepdims=True)
+    ) * ab
+
+
+def _support_rows(state_positions, imbalance, network: Network, displacement=0.0):
     length, _, force = reference_scales(network)
-    P = network.position_projector
-    dr = state_positions - network.positions
-    fixed = jnp.einsum("nij,nj->ni", P, dr) / length
+    attached = network.attached[:, None]
     eye = jnp.eye(network.dim)
+    P = jnp.where(attached[..., None], eye[None], network.position_projector)
+    moved = network.positions + displacement * network.probe[:, None] * network.probe_direction[None, :]
+    target = jnp.where(attached, state_positions[network.attach], moved)
+    fixed = jnp.einsum("nij,nj->ni", P, state_positions - target) / length
     free = jnp.einsum("nij,nj->ni", eye[None] - P, imbalance) / force
     return fixed + free
+
+
+def _director_targets(directors, network: Network):
+    """Prescribed directors: the reference one at clamps; at a daughter base, the reference
+    daughter direction carried along with the mother's current tangent (2D: fixed angle
+    offset; 3D: minimal rotation of the reference pair, see docs/equations.md)."""
+    attached = network.attached
+    J = network.attach
+    if network.dim == 2:
+        ref = jnp.arctan2(network.tangents[:, 1], network.tangents[:, 0])
+        offset = jnp.arctan2(jnp.sin(ref - ref[J]), jnp.cos(ref - ref[J]))
+        return jnp.where(attached, directors[J] + offset, ref)
+    carried = _transport(network.tangents[J], _unit(directors[J]), network.tangents)
+    return jnp.where(attached[:, None], carried, network.tangents)
+
+
+def _moment_transfer(state, network: Network):
+    """Daughter base moments handed to the mother (Σ end moments = 0 at a junction).
+
+    Returns (per segment [S] / [S, 3]: subtracted from the start moment of the mother segment
+    that leaves the junction; per node: subtracted in the end-moment equation of a mother
+    node where no segment leaves).  In 3D the component along the mother tangent (a twist,
+    which the torsion-free rod does not carry) is dropped."""
+    m, J, n_seg = state.moments, network.attach, network.n_segments
+    if network.dim == 3:
+        tJ = _unit(state.directors[J])
+        m = m - jnp.sum(m * tJ, -1, keepdims=True) * tJ
+    m = jnp.where(network.attached.reshape((-1,) + (1,) * (m.ndim - 1)), m, 0.0)
+    to_segment = jax.ops.segment_sum(m, network.transfer_segment, num_segments=n_seg + 1)[:n_seg]
+    at_end = (network.transfer_segment == n_seg).reshape((-1,) + (1,) * (m.ndim - 1))
+    to_node = jax.ops.segment_sum(jnp.where(at_end, m, 0.0), J, num_segments=network.n_nodes)
+    return to_segment, to_node
 
 
 def socb_residual(
@@ -104,33 +166,40 @@ def socb_residual(
     loads: Float[Array, "N d"],
     frames: Float[Array, "S 2 3"],
     quad: SegmentQuadrature,
+    displacement=0.0,
 ) -> Float[Array, " R"]:
-    """The full SOCB residual vector (dimensionless), segment rows first, then node rows."""
+    """The full SOCB residual vector (dimensionless), segment rows first, then node rows.
+
+    ``loads`` [N, d] external nodal forces (pN); ``displacement`` probe displacement (µm)."""
     a, b = network.segments[:, 0], network.segments[:, 1]
     r, d, m = state.positions, state.directors, state.moments
     length_ref, EI_ref, _ = reference_scales(network)
+    to_segment, to_node = _moment_transfer(state, network)
+    m_start = m[a] - to_segment
     if network.dim == 2:
         seg = jax.vmap(planar_segment_residual, in_axes=(0,) * 9 + (None,))(
-            r[a], d[a], m[a], r[b], d[b], m[b], state.forces, network.lengths, network.EI, quad
+            r[a], d[a], m_start, r[b], d[b], m[b], state.forces, network.lengths, network.EI, quad
         )
     else:
         seg = jax.vmap(spatial_segment_residual, in_axes=(0,) * 10 + (None,))(
-            r[a], d[a], m[a], r[b], d[b], m[b], state.forces, network.lengths, network.EI, frames, quad
+            r[a], d[a], m_start, r[b], d[b], m[b], state.forces, network.lengths, network.EI, frames, quad
         )
-    imbalance = net_nodal_force(state.forces, network, loads)
-    support = _support_rows(r, imbalance, network)
+    imbalance = routed_nodal_force(state.forces, network, loads)
+    support = _support_rows(r, imbalance, network, displacement)
     moment_scale = length_ref / EI_ref
+    director_target = _director_targets(d, network)
     if network.dim == 2:
-        theta_ref = jnp.arctan2(network.tangents[:, 1], network.tangents[:, 0])
-        candidates = jnp.concatenate([support, (d - theta_ref)[:, None], (m * moment_scale)[:, None]], axis=1)
+        candidates = jnp.concatenate(
+            [support, (d - director_target)[:, None], ((m - to_node) * moment_scale)[:, None]], axis=1
+        )
     else:
         candidates = jnp.concatenate(
             [
                 support,
                 (0.5 * (jnp.sum(d * d, axis=1) - 1.0))[:, None],
-                d - network.tangents,
+                d - director_target,
                 (jnp.sum(m * d, axis=1) * moment_scale)[:, None],
-                m * moment_scale,
+                (m - to_node) * moment_scale,
             ],
             axis=1,
         )
@@ -152,5 +221,5 @@ class SOCBModel(eqx.Module):
     def frames(self, state: SOCBState):
         return socb_frames(state, self.network)
 
-    def residual(self, state: SOCBState, loads, frames):
-        return socb_residual(state, self.network, loads, frames, self.quad)
+    def residual(self, state: SOCBState, loads, frames, displacement=0.0):
+        return socb_residual(state, self.network, loads, frames, self.quad, displacement)

@@ -82,6 +82,10 @@ def make_model(network: Network, model: str = "socb", *, quadrature_order: int =
     if model == "socb":
         return SOCBModel(network, get_quadrature(quadrature_order))
     if model == "jointed":
+        if network.n_junctions or bool(np.any(np.asarray(network.probe))):
+            raise ValueError(
+                "the jointed baseline supports single filaments only (no branch junctions or probe); use model='socb'"
+            )
         return JointedModel(network)
     raise ValueError(f"unknown model {model!r}; use one of {MODELS}")
 
@@ -191,7 +195,8 @@ def solve(
     Parameters
     ----------
     network : from :func:`socbjax.cantilever`, :func:`socbjax.column`, ...
-    forces : {node index: force vector (pN)} (negative indices allowed) or array [N, d].
+    forces : {node index: force vector (pN)} (negative indices allowed) or array [N, d];
+        added to the network's own ``loads`` and ramped together from zero.
     model : "socb" (the SOCB method) or "jointed" (the Eq. 4 baseline).
     quadrature_order : Gauss–Legendre points per segment for Eqs 7 and 9 (SOCB only).
     solver : Newton settings (:class:`NewtonSolver`); default atol 1e-12 on the
@@ -208,7 +213,7 @@ def solve(
     :class:`Solution`.
     """
     disc = make_model(network, model, quadrature_order=quadrature_order)
-    loads = jnp.asarray(forces_array(network, forces))
+    loads = jnp.asarray(forces_array(network, forces)) + network.loads
     solver = NewtonSolver() if solver is None else solver
     settings = ContinuationSettings() if continuation is None else continuation
     state0 = disc.initial_state() if initial_state is None else initial_state
