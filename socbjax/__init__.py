@@ -14,12 +14,16 @@ import jax as _jax
 _jax.config.update("jax_enable_x64", True)
 
 from ._builders import SUPPORTS, cantilever, column  # noqa: E402
+from ._compress import compress, probe_network, strand_perturbation  # noqa: E402
 from ._continuation import ContinuationResult, ContinuationSettings, load_continuation  # noqa: E402
+from ._io import load, load_checkpoint, save, save_checkpoint  # noqa: E402
 from ._jointed import JointedModel, JointedState  # noqa: E402
 from ._network import Network, make_network  # noqa: E402
 from ._newton import NewtonResult, NewtonSolver, Status  # noqa: E402
+from ._path import PathSettings  # noqa: E402
 from ._quadrature import coupling_matrix, gauss_legendre, quintic_coefficients  # noqa: E402
 from ._residual import SOCBModel, SOCBState, socb_residual  # noqa: E402
+from ._result import PHASES, CompressionResult, LimitPoint  # noqa: E402
 from ._solve import MODELS, ConvergenceError, Solution, buckling_load, forces_array, make_model, solve  # noqa: E402
 
 __version__ = "0.1.0"
@@ -30,6 +34,17 @@ __all__ = [
     "make_network",
     "cantilever",
     "column",
+    "compress",
+    "probe_network",
+    "strand_perturbation",
+    "PathSettings",
+    "CompressionResult",
+    "LimitPoint",
+    "PHASES",
+    "save",
+    "load",
+    "save_checkpoint",
+    "load_checkpoint",
     "SUPPORTS",
     "solve",
     "buckling_load",

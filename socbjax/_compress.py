@@ -327,6 +327,8 @@ def compress(
         result is ``error.result``); with ``throw=False`` check ``result.completed``.
     parameters : extra JSON-able metadata stored in the result (e.g. builder arguments).
     """
+    if not isinstance(network, Network):
+        raise TypeError(f"network must be a socbjax Network (e.g. socbjax.column(...)), got {type(network).__name__}")
     network = probe_network(network)
     settings = PathSettings() if settings is None else settings
     if method != settings.method:
@@ -340,7 +342,15 @@ def compress(
     model = SOCBModel(network, get_quadrature(quadrature_order))
     x0, unravel = ravel_pytree(model.initial_state())
     zeros = jax.tree_util.tree_map(jnp.zeros_like, model.initial_state())
-    geometry = ravel_pytree(eqx.tree_at(lambda st: st.positions, zeros, jnp.ones_like(network.positions)))[0]
+    # Path norm: node positions and directors (× mean segment length, so in µm) count;
+    # moments and forces grow along any path and would hide a jump between branches.
+    ell = jnp.mean(network.lengths)
+    geometry = ravel_pytree(
+        eqx.tree_at(
+            lambda st: (st.positions, st.directors), zeros,
+            (jnp.ones_like(network.positions), jnp.full_like(zeros.directors, ell**2)),
+        )
+    )[0]
     axial = jnp.where(network.probe[:, None, None], jnp.outer(network.probe_direction, network.probe_direction), 0.0)
     free = eqx.tree_at(lambda n: n.position_projector, network, network.position_projector - axial)
     settle = _Problem(SOCBModel(free, model.quad), loads, jnp.array([0.0, 0.0]), jnp.array([1.0, 0.0]))

@@ -112,7 +112,6 @@ class Network(eqx.Module):
 def _socb_rows(dim: int, director_fixed: np.ndarray, moment_free: np.ndarray) -> np.ndarray:
     """Static selection of node equations: clamped and daughter-base nodes prescribe the
     director, free/pinned ends the moment (see :mod:`socbjax._residual`)."""
-    width = 4 if dim == 2 else 11
     if dim == 2:
         local = np.array([[1, 1, c, f] for c, f in zip(director_fixed, moment_free)], bool)
     else:

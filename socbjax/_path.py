@@ -6,7 +6,8 @@ parameter; the caller maps p to a probe displacement or a load factor) is follow
 converged ``(x₀, 0)`` to ``p = 1``.
 
 * **Predictor.**  The unit path tangent τ = (ẋ, ṗ) from J ẋ = −F_p ṗ (J = ∂F/∂x, F_p = ∂F/∂p),
-  normalised in the weighted norm ‖(δx, δp)‖² = mean node displacement² + (p_scale δp)²
+  normalised in the weighted norm ‖(δx, δp)‖² = mean over nodes of (|δr|² + ℓ²|δdirector|²)
+  + (p_scale δp)² (ℓ: mean segment length)
   (so the step ``ds`` is in µm) and oriented like the previous step; the predictor is
   (x, p) + ds τ, shortened to land exactly on p = 1.  Both methods use it: near a straight
   strand's buckling the shape changes like √u, so a step in u alone would be a poor guess.
@@ -251,6 +252,7 @@ def path_run(make_F, carry: dict, weights, p_scale, linsolver, settings: PathSet
 
 
 def path_weights(x_template: Array, geometry_mask: Array, n_nodes: int, p_scale) -> Array:
-    """Norm weights [n + 1]: node positions averaged over nodes, p scaled to µm."""
+    """Norm weights [n + 1]: ``geometry_mask`` (squared µm per unit of each state entry,
+    zero for entries left out) averaged over nodes, and p scaled to µm."""
     w = geometry_mask / n_nodes
     return jnp.concatenate([w, jnp.asarray(p_scale, x_template.dtype)[None] ** 2])
