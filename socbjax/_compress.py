@@ -26,7 +26,8 @@ import jax.numpy as jnp
 import numpy as np
 from jax.flatten_util import ravel_pytree
 
-from ._linear import jacobian_solver
+from ._linear import SparseJacobianSolver, jacobian_solver
+from ._sparsity import prepare_structured
 from ._network import Network, _add_direction
 from ._newton import Status
 from ._path import PathSettings, path_run, path_start, path_weights
@@ -354,7 +355,12 @@ def compress(
     axial = jnp.where(network.probe[:, None, None], jnp.outer(network.probe_direction, network.probe_direction), 0.0)
     free = eqx.tree_at(lambda n: n.position_projector, network, network.position_projector - axial)
     settle = _Problem(SOCBModel(free, model.quad), loads, jnp.array([0.0, 0.0]), jnp.array([1.0, 0.0]))
-    linsolver = jacobian_solver(linear_solver, x0.size).prepare(settle.make_F(unravel)(x0), x0)
+    backend = jacobian_solver(linear_solver, x0.size)
+    F_settle = settle.make_F(unravel)(x0)
+    if isinstance(backend, SparseJacobianSolver):
+        linsolver = prepare_structured(lambda y: F_settle(y, 0.5), x0, model.structure(), permc_spec="COLAMD")
+    else:
+        linsolver = backend.prepare(lambda y: F_settle(y, 0.5), x0)
     fingerprint = _fingerprint(network, np.asarray(loads), u_max, unload, settings, quadrature_order)
     chunk = int(checkpoint_every) if (checkpoint or progress) else settings.max_steps
     bar = _Progress(progress, u_max)

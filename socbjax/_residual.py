@@ -26,6 +26,7 @@ from __future__ import annotations
 import equinox as eqx
 import jax
 import jax.numpy as jnp
+import numpy as np
 from jaxtyping import Array, Float
 
 from ._geometry import orthonormal_complement
@@ -41,6 +42,7 @@ __all__ = [
     "net_nodal_force",
     "routed_nodal_force",
     "reference_scales",
+    "socb_structure",
 ]
 
 
@@ -206,6 +208,37 @@ def socb_residual(
     return jnp.concatenate([seg.ravel(), candidates.ravel()[network.socb_rows]])
 
 
+def socb_structure(network: Network):
+    """Graph structure of the SOCB system, for sparse Jacobians (host side, numpy).
+
+    Vertices are the nodes (0..N−1) and segments (N..N+S−1); edges join a segment to its two
+    nodes and a daughter base to its mother node.  Returns (vertex of each unknown [n],
+    vertex of each residual row [n], edges [E, 2], number of vertices).  Every residual row
+    at vertex v depends only on unknowns at vertices within graph distance 2 of v (segment
+    rows: their nodes, and through the moment transfer the daughter bases at their start
+    node; force rows at a mother node: the daughters' segments).
+    """
+    n_nodes, n_seg, d = network.n_nodes, network.n_segments, network.dim
+    node_ids = np.arange(n_nodes)
+    director_width = 1 if d == 2 else 3
+    unknown = np.concatenate([
+        np.repeat(node_ids, d), np.repeat(node_ids, director_width), np.repeat(node_ids, director_width),
+        np.repeat(n_nodes + np.arange(n_seg), d),
+    ])
+    seg_rows = 4 if d == 2 else 7
+    width = 4 if d == 2 else 11
+    rows = np.concatenate([np.repeat(n_nodes + np.arange(n_seg), seg_rows), np.asarray(network.socb_rows) // width])
+    seg = np.asarray(network.segments)
+    attach = np.asarray(network.attach)
+    daughters = np.flatnonzero(attach != node_ids)
+    edges = np.concatenate([
+        np.stack([seg[:, 0], n_nodes + np.arange(n_seg)], 1),
+        np.stack([seg[:, 1], n_nodes + np.arange(n_seg)], 1),
+        np.stack([daughters, attach[daughters]], 1),
+    ])
+    return unknown, rows, edges, n_nodes + n_seg
+
+
 class SOCBModel(eqx.Module):
     """The SOCB discretisation of a network, as used by the solvers.
 
@@ -217,6 +250,10 @@ class SOCBModel(eqx.Module):
 
     def initial_state(self) -> SOCBState:
         return socb_initial_state(self.network)
+
+    def structure(self):
+        """See :func:`socb_structure`."""
+        return socb_structure(self.network)
 
     def frames(self, state: SOCBState):
         return socb_frames(state, self.network)
