@@ -358,7 +358,8 @@ def compress(
     backend = jacobian_solver(linear_solver, x0.size)
     F_settle = settle.make_F(unravel)(x0)
     if isinstance(backend, SparseJacobianSolver):
-        linsolver = prepare_structured(lambda y: F_settle(y, 0.5), x0, model.structure(), permc_spec="COLAMD")
+        F_load = _Problem(model, loads, jnp.array([1.0, 0.0]), jnp.array([1.0, 0.1])).make_F(unravel)(x0)
+        linsolver = prepare_structured([lambda y: F_settle(y, 0.5), lambda y: F_load(y, 0.5)], x0, model.structure())
     else:
         linsolver = backend.prepare(lambda y: F_settle(y, 0.5), x0)
     fingerprint = _fingerprint(network, np.asarray(loads), u_max, unload, settings, quadrature_order)

@@ -201,14 +201,19 @@ class SparseJacobianSolver(eqx.Module):
 
         ``fn`` maps x [n] -> [n]; its sparsity must not depend on captured parameter values.
         """
-        n = int(np.size(x_example))
         rows, cols = sparsity_pattern(fn, x_example, seed=seed)
+        return self.from_pattern(rows, cols, int(np.size(x_example)), seed=seed, permc_spec=self.permc_spec)
+
+    @classmethod
+    def from_pattern(cls, rows, cols, n: int, *, seed: int = 0, permc_spec: str = "MMD_AT_PLUS_A"):
+        """A prepared solver for a known pattern: ``rows``, ``cols`` [nnz] in CSC order (sorted
+        by column, then row, no duplicates); entries outside it are taken as zero."""
+        rows, cols = np.asarray(rows, np.int32), np.asarray(cols, np.int32)
         colors = color_columns(rows, cols, n, seed=seed)
         indptr = np.concatenate([[0], np.cumsum(np.bincount(cols, minlength=n))]).astype(np.int32)
         gather = colors[cols].astype(np.int64) * n + rows
-        return SparseJacobianSolver(n=n, n_colors=int(colors.max()) + 1 if n else 0, rows=_Frozen(rows),
-                                    cols=_Frozen(cols), indptr=_Frozen(indptr), colors=_Frozen(colors),
-                                    gather=_Frozen(gather), permc_spec=self.permc_spec)
+        return cls(n=n, n_colors=int(colors.max()) + 1 if n else 0, rows=_Frozen(rows), cols=_Frozen(cols),
+                   indptr=_Frozen(indptr), colors=_Frozen(colors), gather=_Frozen(gather), permc_spec=permc_spec)
 
     def _check(self, x: Array) -> None:
         if self.rows is None:

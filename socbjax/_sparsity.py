@@ -14,7 +14,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from ._linear import SparseJacobianSolver, _Frozen, color_columns
+from ._linear import SparseJacobianSolver
 
 __all__ = ["structural_pattern", "prepare_structured"]
 
@@ -40,35 +40,37 @@ def structural_pattern(structure, radius: int = 2) -> tuple[np.ndarray, np.ndarr
 
 
 def _solver(rows, cols, n, permc_spec) -> SparseJacobianSolver:
-    colors = color_columns(rows, cols, n)
-    indptr = np.concatenate([[0], np.cumsum(np.bincount(cols, minlength=n))]).astype(np.int32)
-    gather = colors[cols].astype(np.int64) * n + rows
-    return SparseJacobianSolver(
-        n=n, n_colors=int(colors.max()) + 1, rows=_Frozen(rows), cols=_Frozen(cols), indptr=_Frozen(indptr),
-        colors=_Frozen(colors), gather=_Frozen(gather), permc_spec=permc_spec,
-    )
+    return SparseJacobianSolver.from_pattern(rows, cols, n, permc_spec=permc_spec)
 
 
-def prepare_structured(fn, x_example, structure, *, permc_spec: str = "MMD_AT_PLUS_A") -> SparseJacobianSolver:
-    """A prepared :class:`SparseJacobianSolver` with the exact pattern of ∂fn/∂x: the graph
-    pattern of ``structure``, coloured, gives the Jacobian at two random points from a few
-    dozen jvps; its non-zeros are the pattern, coloured again (fewer colours).  Raises
-    ``RuntimeError`` if the result misses a dependency of ``fn`` (checked with a random jvp)."""
+def prepare_structured(fns, x_example, structure, *, permc_spec: str = "COLAMD") -> SparseJacobianSolver:
+    """A prepared :class:`SparseJacobianSolver` whose pattern covers ∂f/∂x of every f in
+    ``fns`` (e.g. the settle and the loading residuals, which differ in their probe rows):
+    the graph pattern of ``structure``, coloured, gives each Jacobian at two random points
+    from a few dozen jvps; the union of their non-zeros is the pattern, coloured again.
+    Raises ``RuntimeError`` if the result misses a dependency (checked with a random jvp).
+
+    COLAMD is the default ordering: on SOCB network Jacobians at straight reference states
+    the symmetric minimum-degree ordering (``MMD_AT_PLUS_A``) produced factorisations ~100×
+    slower (measured 3.7 s vs 11 ms for the 8-generation outcrop, n = 6891)."""
+    fns = list(fns) if isinstance(fns, (list, tuple)) else [fns]
     n = int(np.size(x_example))
     rows, cols = structural_pattern(structure)
     conservative = _solver(rows, cols, n, permc_spec)
-    values = jax.jit(lambda z: conservative.jacobian_values(fn, z))
     rng = np.random.default_rng(1)
     keep = np.zeros(rows.size, bool)
-    for _ in range(2):
-        keep |= np.asarray(values(jnp.asarray(np.asarray(x_example) + rng.uniform(-0.3, 0.3, n)))) != 0
+    for fn in fns:
+        values = jax.jit(lambda z, fn=fn: conservative.jacobian_values(fn, z))
+        for _ in range(2):
+            keep |= np.asarray(values(jnp.asarray(np.asarray(x_example) + rng.uniform(-0.3, 0.3, n)))) != 0
     solver = _solver(rows[keep], cols[keep], n, permc_spec)
-    y = jnp.asarray(np.asarray(x_example) + rng.uniform(-0.3, 0.3, n))
-    v = rng.normal(size=n)
-    exact = np.asarray(jax.jvp(fn, (y,), (jnp.asarray(v),))[1])
-    vals = np.asarray(jax.jit(lambda z: solver.jacobian_values(fn, z))(y))
-    approx = np.zeros(n)
-    np.add.at(approx, solver.rows.a, vals * v[solver.cols.a])
-    if not np.allclose(approx, exact, rtol=1e-8, atol=1e-8 * max(1.0, float(np.abs(exact).max()))):
-        raise RuntimeError("the graph sparsity pattern misses dependencies of the residual; use linear_solver='dense'")
+    for fn in fns:
+        y = jnp.asarray(np.asarray(x_example) + rng.uniform(-0.3, 0.3, n))
+        v = rng.normal(size=n)
+        exact = np.asarray(jax.jvp(fn, (y,), (jnp.asarray(v),))[1])
+        vals = np.asarray(jax.jit(lambda z, fn=fn: solver.jacobian_values(fn, z))(y))
+        approx = np.zeros(n)
+        np.add.at(approx, solver.rows.a, vals * v[solver.cols.a])
+        if not np.allclose(approx, exact, rtol=1e-8, atol=1e-8 * max(1.0, float(np.abs(exact).max()))):
+            raise RuntimeError("the graph sparsity pattern misses dependencies of the residual; use linear_solver='dense'")
     return solver

@@ -98,6 +98,12 @@ def test_colouring_of_irregular_pattern():
     assert np.unique(pairs).size == pairs.size
 
 
+def test_from_pattern_matches_prepare(case):
+    solver = case[2]
+    again = L.SparseJacobianSolver.from_pattern(solver.rows.a, solver.cols.a, solver.n)
+    assert again == solver and hash(again) == hash(solver)
+
+
 def test_permutation_sign():
     rng = np.random.default_rng(0)
     for n in (1, 2, 5, 17, 64):
