@@ -17,7 +17,14 @@ from pathlib import Path
 
 HERE = Path(__file__).resolve().parent
 ROOT = HERE.parent
-SCRIPTS = ["fig4a_cantilever_error", "fig4b_nodes_for_accuracy", "fig5c_buckling_error", "solve_timing"]
+SCRIPTS = [
+    "fig4a_cantilever_error",
+    "fig4b_nodes_for_accuracy",
+    "fig5c_buckling_error",
+    "solve_timing",
+    "linear_timing",
+    "outcrop_compression",
+]
 
 
 def main(argv=None) -> int:

@@ -15,7 +15,9 @@ _jax.config.update("jax_enable_x64", True)
 
 from ._builders import SUPPORTS, cantilever, column  # noqa: E402
 from ._compress import compress, probe_network, strand_perturbation  # noqa: E402
+from ._dendritic import dendritic_outcrop, unit_dendritic_mesh  # noqa: E402
 from ._continuation import ContinuationResult, ContinuationSettings, load_continuation  # noqa: E402
+from ._figures import plot_end_forces, plot_force_curve, plot_snapshots, plot_strand_forces, save_figures  # noqa: E402
 from ._io import load, load_checkpoint, save, save_checkpoint  # noqa: E402
 from ._jointed import JointedModel, JointedState  # noqa: E402
 from ._network import Network, make_network  # noqa: E402
@@ -35,6 +37,8 @@ __all__ = [
     "cantilever",
     "column",
     "compress",
+    "unit_dendritic_mesh",
+    "dendritic_outcrop",
     "probe_network",
     "strand_perturbation",
     "PathSettings",
@@ -42,6 +46,11 @@ __all__ = [
     "LimitPoint",
     "PHASES",
     "save",
+    "save_figures",
+    "plot_force_curve",
+    "plot_snapshots",
+    "plot_end_forces",
+    "plot_strand_forces",
     "load",
     "save_checkpoint",
     "load_checkpoint",

@@ -38,6 +38,8 @@ from ._solve import ConvergenceError
 
 __all__ = ["compress", "probe_network", "strand_perturbation"]
 
+_UNLOAD_MARGIN = 1e-4  # unloading ends at u0 + margin × (displacement − u0)
+
 
 def _is_chain(network: Network) -> bool:
     seg = np.asarray(network.segments)
@@ -116,6 +118,11 @@ def _check_inputs(network, displacement, settings) -> float:
     if not np.isfinite(u) or u <= 0:
         raise ValueError(f"displacement must be a positive probe travel (µm), got {displacement!r}")
     gap = _gap(network)
+    if not np.isfinite(gap):
+        raise ValueError(
+            "nothing supports the network opposite the probe (no fixed node other than probe nodes): "
+            "compressing it would only translate it; e.g. grow the outcrop until strands reach the surface"
+        )
     if u >= gap:
         raise ValueError(
             f"displacement {u} µm reaches the opposing support (gap {gap:.4g} µm between probe and surface); "
@@ -310,7 +317,8 @@ def compress(
         moves toward the first (its lateral support is kept: "free" = frictionless push).
     displacement : total probe travel (µm) from the as-built probe position; must be smaller
         than the probe–surface gap.
-    unload : then withdraw the probe back to the settled start (reversibility, hysteresis).
+    unload : then withdraw the probe back toward the settled start u₀, stopping at
+        u₀ + 1e-4 (displacement − u₀) (reversibility, hysteresis; see the source for why).
     method : "displacement" (natural-parameter control; stops with ``Status.CRITICAL_POINT`` at
         a fold) or "arclength" (pseudo-arclength: follows folds and snap-backs).  Overrides
         ``settings.method``.
@@ -396,7 +404,10 @@ def compress(
             problem, scale, x_start = settle, 4.0 * settings.max_step, x0
         else:
             u0 = float(extra["u0"])
-            ends = (u0, u_max) if index == 1 else (u_max, u0)
+            # Unloading stops just short of the settled start: there the strands are straight
+            # again and the stiffness turns singular (the force falls from ~Euler to 0 over a
+            # vanishing displacement), which no step size resolves reliably.
+            ends = (u0, u_max) if index == 1 else (u_max, u0 + _UNLOAD_MARGIN * (u_max - u0))
             problem = _Problem(model, loads, jnp.array([1.0, ends[0]]), jnp.array([1.0, ends[1]]))
             scale, x_start = abs(ends[1] - ends[0]), jnp.asarray(parts[-1]["X"][-1])
         weights = path_weights(x0, geometry, network.n_nodes, scale)

@@ -132,7 +132,7 @@ def unit_dendritic_mesh(
     EI: float = 0.071,
     branch_angle: float = 70.0,
     mother_length: float = 1.0,
-    daughter_length: float = 0.5,
+    daughter_length: float | None = None,
     segment_length: float = 0.25,
     dim: int = 3,
     perturbation: float = 0.0,
@@ -141,16 +141,23 @@ def unit_dendritic_mesh(
     +z to the surface at z = ``mother_length``, hinged there, and a daughter from the
     mother's middle at ``branch_angle`` degrees in the x–z plane (x–y in 2D).
 
-    The daughter's tip reaches the surface only if ``daughter_length`` cos(angle) ≥
-    ``mother_length``/2 (not with the defaults); it is then hinged there, otherwise free.
+    "Ends that reach the opposing surface [are] hinged there": by default
+    (``daughter_length=None``) the daughter grows until it reaches the surface,
+    (mother_length/2)/cos(angle) long — 0.53 µm at the paper caption's 20° (its "0.5 µm
+    daughter"), 1.46 µm at 70° — and is hinged there.  A shorter ``daughter_length`` leaves
+    its tip free (then the unloaded daughter only rides along: the mesh is the bare mother).
     ``segment_length`` (µm) is the node spacing (the middle must fall on a node).
     ``perturbation`` (pN): lateral force on each strand's middle node (0: none;
     :func:`socbjax.compress` then applies its default).  Deterministic (no randomness).
     """
     dim = _dim(dim)
     EI = _positive("EI", EI, "pN·µm²")
-    L, Ld, ell = (_positive(n, v, "µm") for n, v in (("mother_length", mother_length), ("daughter_length", daughter_length), ("segment_length", segment_length)))
+    L, ell = (_positive(n, v, "µm") for n, v in (("mother_length", mother_length), ("segment_length", segment_length)))
     phi = _angle(branch_angle)
+    reach = (0.5 * L) / np.cos(phi) if np.cos(phi) > 1e-12 else np.inf
+    Ld = reach if daughter_length is None else _positive("daughter_length", daughter_length, "µm")
+    if not np.isfinite(Ld):
+        raise ValueError("a daughter at branch_angle >= 90° never reaches the surface; give daughter_length")
     half = 0.5 * L / ell
     if abs(half - round(half)) > 1e-9 or round(half) < 1:
         raise ValueError(f"segment_length must divide half the mother ({0.5 * L} µm) into whole segments, got {ell}")
@@ -161,12 +168,12 @@ def unit_dendritic_mesh(
     top = g.grow(middle, axis, [ell] * round(half), strand=0)
     g.pinned.append(top)
     t_d = np.cos(phi) * axis + np.sin(phi) * side
-    reach = (0.5 * L) / max(np.cos(phi), 1e-300) if np.cos(phi) > 0 else np.inf
     length = min(Ld, reach)
     daughter = g.node(g.pos[middle], t_d)
     g.attach.append((middle, daughter))
     tip = g.grow(daughter, t_d, _pieces(length, ell), strand=1)
-    if length < Ld:
+    if Ld >= reach - 1e-12:
+        g.pos[tip][-1] = L  # exactly on the surface
         g.pinned.append(tip)
     return g.build(EI, perturbation, 0)
 

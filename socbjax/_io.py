@@ -1,33 +1,50 @@
 """HDF5 input/output: :func:`save` / :func:`load` of a :class:`CompressionResult`, and the
-checkpoints of long runs.
+checkpoints of long runs (:func:`save_checkpoint` / :func:`load_checkpoint`).
 
-Every file is written atomically: to a temporary file in the target's folder, then renamed
-over the target (``os.replace``), so an interrupted write never leaves a partial or corrupt
-file under the target name.  Files carry ``format``, ``format_version`` and the socbjax
-version; units are stored as attributes (µm, pN, pN·µm).
+Layout of a result file (``format = "socbjax.compression"``, ``format_version = 1``)::
+
+    /                 attrs: format, format_version, socbjax_version, created (UTC, ISO 8601),
+                             status (int, see socbjax.Status), parameters (JSON string)
+    /path/<field>     one dataset per array field of the result (displacement, force, ...)
+    /limit_points/    parallel datasets kind, step, displacement, force, phase (strings UTF-8)
+    /network/<field>  one dataset per array field of the Network; static fields (dim) as attrs
+    /units            attrs: field -> unit (µm, pN, pN·µm, ...); datasets also carry "units"
+
+Every file is written atomically: into a temporary file ``.<name>.<random>.tmp`` in the
+target's folder, flushed to disk, then renamed over the target (``os.replace``).  An existing
+file at the target is replaced whatever it holds (no check that it is a socbjax file); on any
+error the temporary file is removed and a previous target is left untouched, so an interrupted
+write never leaves a partial file under the target name.
+
+Arrays keep their dtype and shape exactly (compression is lossless gzip), so a checkpoint
+resumes bit-identically.  ``parameters`` and checkpoint ``meta`` go through JSON: tuples come
+back as lists, numpy scalars/arrays as Python numbers/lists.
 """
 
 from __future__ import annotations
 
 import dataclasses
 import datetime
+import errno
 import json
 import os
+import stat
 import tempfile
 from pathlib import Path
+from typing import Any
 
 import h5py
 import jax.numpy as jnp
 import numpy as np
 
 from ._network import Network
-from ._result import CompressionResult, LimitPoint
+from ._result import PHASES, CompressionResult, LimitPoint
 
-__all__ = ["save", "load", "save_checkpoint", "load_checkpoint", "FORMAT_VERSION"]
+__all__ = ["save", "load", "save_checkpoint", "load_checkpoint", "FORMAT_VERSION", "UNITS"]
 
 FORMAT_VERSION = 1
-_RESULT_FORMAT = "socbjax.compression"
-_CHECKPOINT_FORMAT = "socbjax.checkpoint"
+RESULT_FORMAT = "socbjax.compression"
+CHECKPOINT_FORMAT = "socbjax.checkpoint"
 UNITS = {
     "displacement": "µm",
     "force": "pN",
@@ -36,113 +53,281 @@ UNITS = {
     "moments": "pN·µm",
     "segment_forces": "pN",
     "end_forces": "pN",
+    "limit_points/displacement": "µm",
+    "limit_points/force": "pN",
     "network/positions": "µm",
+    "network/tangents": "1",
     "network/lengths": "µm",
     "network/EI": "pN·µm²",
     "network/loads": "pN",
+    "network/probe_direction": "1",
 }
+_COMPRESS_ABOVE = 4096  # elements; smaller datasets are stored contiguous, uncompressed
+_NOT_PATH = ("limit_points", "status", "network", "parameters")
+_LIMIT_TYPES = {"str": h5py.string_dtype("utf-8"), "int": np.dtype(np.int64), "float": np.dtype(np.float64)}
+
+
+# ----------------------------------------------------------------------------- helpers
+
+
+def _to_json(value: Any, what: str) -> str:
+    def default(obj):
+        if isinstance(obj, (np.generic, np.ndarray)):
+            return obj.tolist()
+        raise TypeError(f"{type(obj).__name__} is not JSON-serialisable")
+
+    try:
+        return json.dumps(value, default=default)
+    except (TypeError, ValueError) as err:
+        raise TypeError(f"{what} must be JSON-serialisable (dicts, lists, str, numbers, bool, None): {err}") from err
+
+
+def _as_storable(name: str, value) -> np.ndarray:
+    arr = np.asarray(value)
+    if arr.dtype.kind in "OU":
+        raise TypeError(f"array {name!r} has dtype {arr.dtype}; only numeric, bool or bytes arrays can be stored")
+    return arr
+
+
+def _dataset(group: h5py.Group, name: str, value: np.ndarray, units: str | None = None) -> h5py.Dataset:
+    kwargs = {"compression": "gzip", "compression_opts": 4, "shuffle": True} if value.size > _COMPRESS_ABOVE else {}
+    ds = group.create_dataset(name, data=value, **kwargs)
+    if units is not None:
+        ds.attrs["units"] = units
+    return ds
+
+
+def _read(ds: h5py.Dataset) -> np.ndarray:
+    """The dataset as an ndarray (0-d datasets as 0-d arrays, not numpy scalars)."""
+    return np.asarray(ds[()])
+
+
+def _text(value) -> str | None:
+    return value.decode() if isinstance(value, bytes) else (None if value is None else str(value))
+
+
+def _new_file_mode(path: Path) -> int:
+    """Permissions for the target: those of the file it replaces, else 0o666 minus the umask
+    (temporary files are created 0o600)."""
+    if path.exists():
+        return stat.S_IMODE(path.stat().st_mode)
+    mask = os.umask(0o022)
+    os.umask(mask)
+    return 0o666 & ~mask
+
+
+def _fsync(path: Path, directory: bool = False) -> None:
+    try:
+        fd = os.open(path, os.O_RDONLY)
+    except OSError:
+        return
+    try:
+        os.fsync(fd)
+    except OSError:
+        if not directory:  # folders cannot be fsynced on every platform/file system
+            raise
+    finally:
+        os.close(fd)
 
 
 def _atomic_write(path, fill, fmt: str) -> Path:
+    """Create an HDF5 file stamped with ``fmt`` at a temporary name, ``fill(file)`` it, then
+    rename it onto ``path``; on any exception remove the temporary file and re-raise."""
     from . import __version__
 
-    path = Path(path)
-    if not path.parent.exists():
-        raise FileNotFoundError(f"folder {path.parent} does not exist; create it first")
-    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
-    os.close(fd)
+    path = Path(path).expanduser()
+    if not path.parent.is_dir():
+        raise FileNotFoundError(errno.ENOENT, "cannot write: folder does not exist (create it first)", str(path.parent))
+    if path.is_dir():
+        raise IsADirectoryError(errno.EISDIR, "is a folder; give a file name such as result.h5", str(path))
+    with tempfile.NamedTemporaryFile(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp", delete=False) as tmp:
+        tmp_path = Path(tmp.name)
     try:
-        with h5py.File(tmp, "w") as f:
+        with h5py.File(tmp_path, "w") as f:
             f.attrs["format"] = fmt
             f.attrs["format_version"] = FORMAT_VERSION
             f.attrs["socbjax_version"] = __version__
-            f.attrs["created"] = datetime.datetime.now(datetime.timezone.utc).isoformat()
+            f.attrs["created"] = datetime.datetime.now(datetime.timezone.utc).isoformat(timespec="seconds")
             fill(f)
-        os.replace(tmp, path)
+        _fsync(tmp_path)
+        os.chmod(tmp_path, _new_file_mode(path))
+        os.replace(tmp_path, path)
     except BaseException:
-        if os.path.exists(tmp):
-            os.remove(tmp)
+        tmp_path.unlink(missing_ok=True)
         raise
+    _fsync(path.parent, directory=True)
     return path
 
 
 def _open(path, fmt: str) -> h5py.File:
-    path = Path(path)
+    """Open a socbjax file for reading after checking ``format`` and ``format_version``."""
+    from . import __version__
+
+    path = Path(path).expanduser()
     if not path.exists():
-        raise FileNotFoundError(f"no such file: {path}")
+        raise FileNotFoundError(errno.ENOENT, "no such file", str(path))
+    if not path.is_file() or not h5py.is_hdf5(path):
+        raise ValueError(f"{path} is not an HDF5 file (expected a {fmt} file written by socbjax)")
     f = h5py.File(path, "r")
-    if f.attrs.get("format") != fmt:
+    try:
+        found = _text(f.attrs.get("format"))
+        if found != fmt:
+            what = f"a {found} file" if found and found.startswith("socbjax.") else "not a socbjax file"
+            raise ValueError(f"{path} is {what} (format attribute {found!r}); expected format {fmt!r}")
+        version = f.attrs.get("format_version")
+        if version is None or int(version) < 1:
+            raise ValueError(f"{path} has no valid format_version attribute ({version!r}); the file is damaged")
+        if int(version) > FORMAT_VERSION:
+            raise ValueError(
+                f"{path} has format version {int(version)}, written by a newer socbjax "
+                f"({_text(f.attrs.get('socbjax_version'))}); socbjax {__version__} reads versions "
+                f"up to {FORMAT_VERSION}: upgrade socbjax"
+            )
+    except BaseException:
         f.close()
-        raise ValueError(f"{path} is not a {fmt} file (format attribute {f.attrs.get('format')!r})")
-    if int(f.attrs.get("format_version", 0)) > FORMAT_VERSION:
-        f.close()
-        raise ValueError(f"{path} was written by a newer socbjax (format version > {FORMAT_VERSION}); upgrade socbjax")
+        raise
     return f
 
 
-def _dataset(group, name, value):
-    value = np.asarray(value)
-    kwargs = {"compression": "gzip", "compression_opts": 4} if value.size > 4096 else {}
-    group.create_dataset(name, data=value, **kwargs)
+def _require(group: h5py.Group, names, path, what: str) -> None:
+    missing = [n for n in names if n not in group]
+    if missing:
+        raise ValueError(f"{path}: {what} lacks {missing} (damaged file, or written by an older socbjax)")
+
+
+# ----------------------------------------------------------------------------- result
+
+
+def _path_fields() -> list[str]:
+    return [f.name for f in dataclasses.fields(CompressionResult) if f.name not in _NOT_PATH]
+
+
+def _write_limit_points(f: h5py.File, points) -> None:
+    g = f.create_group("limit_points")
+    for field in dataclasses.fields(LimitPoint):
+        kind = field.type if isinstance(field.type, str) else field.type.__name__
+        dtype = _LIMIT_TYPES[kind]
+        values = [getattr(p, field.name) for p in points]
+        data = np.array(values, dtype=object if kind == "str" else dtype)
+        g.create_dataset(field.name, data=data, dtype=dtype)
+        if unit := UNITS.get(f"limit_points/{field.name}"):
+            g[field.name].attrs["units"] = unit
+
+
+def _read_limit_points(g: h5py.Group, path) -> list[LimitPoint]:
+    fields = dataclasses.fields(LimitPoint)
+    _require(g, [fl.name for fl in fields], path, "/limit_points")
+    columns = {}
+    for field in fields:
+        kind = field.type if isinstance(field.type, str) else field.type.__name__
+        ds = g[field.name]
+        values = ds.asstr()[()] if kind == "str" else ds[()]
+        columns[field.name] = [{"str": str, "int": int, "float": float}[kind](v) for v in values]
+    n = len(columns[fields[0].name])
+    return [LimitPoint(**{name: col[i] for name, col in columns.items()}) for i in range(n)]
+
+
+def _write_network(f: h5py.File, network: Network) -> None:
+    g = f.create_group("network")
+    for field in dataclasses.fields(network):
+        value = getattr(network, field.name)
+        if field.metadata.get("static"):
+            g.attrs[field.name] = value
+        else:
+            _dataset(g, field.name, _as_storable(f"network.{field.name}", value), UNITS.get(f"network/{field.name}"))
+
+
+def _read_network(g: h5py.Group, path) -> Network:
+    values = {}
+    for field in dataclasses.fields(Network):
+        if field.metadata.get("static"):
+            if field.name not in g.attrs:
+                raise ValueError(f"{path}: /network lacks the attribute {field.name!r} (damaged or older file)")
+            attr = g.attrs[field.name]
+            values[field.name] = attr.item() if isinstance(attr, np.generic) else attr
+        else:
+            _require(g, [field.name], path, "/network")
+            values[field.name] = jnp.asarray(_read(g[field.name]))
+    return Network(**values)
 
 
 def save(result: CompressionResult, path) -> Path:
-    """Write ``result`` to HDF5 at ``path`` (atomically; an existing file is replaced)."""
+    """Write ``result`` to the HDF5 file ``path``; returns ``path`` as a :class:`Path`.
+
+    Units as in the result (µm, pN, pN·µm), also recorded in ``/units``.  The write is atomic
+    (temporary file + rename): an existing file at ``path`` is replaced, whatever it holds,
+    only once the new file is complete.  Raises ``FileNotFoundError`` if the folder does not
+    exist and ``TypeError`` if ``result.parameters`` is not JSON-serialisable.
+    """
     if not isinstance(result, CompressionResult):
         raise TypeError(f"save expects a CompressionResult (from socbjax.compress), got {type(result).__name__}")
+    parameters = _to_json(result.parameters, "result.parameters")
+    arrays = {name: _as_storable(name, getattr(result, name)) for name in _path_fields()}
 
-    def fill(f):
-        g = f.create_group("path")
-        for field in dataclasses.fields(result):
-            if field.name in ("limit_points", "network", "parameters", "status"):
-                continue
-            _dataset(g, field.name, getattr(result, field.name))
+    def fill(f: h5py.File) -> None:
         f.attrs["status"] = int(result.status)
-        f.attrs["parameters"] = json.dumps(result.parameters)
-        f.attrs["limit_points"] = json.dumps([dataclasses.asdict(p) for p in result.limit_points])
-        net = f.create_group("network")
-        for field in dataclasses.fields(result.network):
-            if field.name == "dim":
-                net.attrs["dim"] = result.network.dim
-            else:
-                _dataset(net, field.name, getattr(result.network, field.name))
+        f.attrs["parameters"] = parameters
+        g = f.create_group("path")
+        for name, value in arrays.items():
+            _dataset(g, name, value, UNITS.get(name))
+        g["phase"].attrs["names"] = list(PHASES)
+        _write_limit_points(f, result.limit_points)
+        _write_network(f, result.network)
         units = f.create_group("units")
         for key, unit in UNITS.items():
             units.attrs[key] = unit
 
-    return _atomic_write(path, fill, _RESULT_FORMAT)
+    return _atomic_write(path, fill, RESULT_FORMAT)
 
 
 def load(path) -> CompressionResult:
-    """Read a :class:`CompressionResult` written by :func:`save`."""
-    with _open(path, _RESULT_FORMAT) as f:
-        arrays = {name: f["path"][name][()] for name in f["path"]}
-        net = {name: jnp.asarray(f["network"][name][()]) for name in f["network"]}
-        network = Network(**net, dim=int(f["network"].attrs["dim"]))
-        points = [LimitPoint(**p) for p in json.loads(f.attrs["limit_points"])]
+    """Read a :class:`CompressionResult` written by :func:`save` (dtypes and shapes as saved).
+
+    Raises ``FileNotFoundError`` for a missing file and ``ValueError`` for a file that is not
+    a socbjax compression result, is damaged, or has a newer ``format_version``.
+    """
+    with _open(path, RESULT_FORMAT) as f:
+        _require(f, ["path", "limit_points", "network"], path, "the file")
+        fields = _path_fields()
+        _require(f["path"], fields, path, "/path")
         return CompressionResult(
-            **arrays,
-            limit_points=points,
+            **{name: _read(f["path"][name]) for name in fields},
+            limit_points=_read_limit_points(f["limit_points"], path),
             status=int(f.attrs["status"]),
-            network=network,
+            network=_read_network(f["network"], path),
             parameters=json.loads(f.attrs["parameters"]),
         )
 
 
-def save_checkpoint(path, arrays: dict, meta: dict) -> Path:
-    """Atomically write named arrays (dtype and shape kept exactly) and JSON-able ``meta``."""
+# ----------------------------------------------------------------------------- checkpoints
 
-    def fill(f):
+
+def save_checkpoint(path, arrays: dict[str, np.ndarray], meta: dict) -> Path:
+    """Atomically write named arrays and JSON-able ``meta`` (a checkpoint of a long run).
+
+    Arrays (numeric, bool or bytes; 0-d allowed; numpy or JAX) keep dtype, shape and every bit,
+    so a run resumed from :func:`load_checkpoint` is bit-identical.  Names are arbitrary strings
+    ("/" allowed); their order is kept.  Returns ``path`` as a :class:`Path`.
+    """
+    meta_json = _to_json(meta, "checkpoint meta")
+    items = [(str(name), _as_storable(str(name), value)) for name, value in arrays.items()]
+
+    def fill(f: h5py.File) -> None:
+        f.attrs["meta"] = meta_json
         g = f.create_group("arrays")
-        for name, value in arrays.items():
-            g.create_dataset(name.replace("/", "|"), data=np.asarray(value))
-        f.attrs["meta"] = json.dumps(meta)
+        g.attrs["names"] = json.dumps([name for name, _ in items])
+        for i, (_, value) in enumerate(items):
+            _dataset(g, str(i), value)
 
-    return _atomic_write(path, fill, _CHECKPOINT_FORMAT)
+    return _atomic_write(path, fill, CHECKPOINT_FORMAT)
 
 
-def load_checkpoint(path) -> tuple[dict, dict]:
-    """(arrays, meta) of a checkpoint written by :func:`save_checkpoint`."""
-    with _open(path, _CHECKPOINT_FORMAT) as f:
-        arrays = {name.replace("|", "/"): f["arrays"][name][()] for name in f["arrays"]}
-        return arrays, json.loads(f.attrs["meta"])
+def load_checkpoint(path) -> tuple[dict[str, np.ndarray], dict]:
+    """``(arrays, meta)`` of a checkpoint written by :func:`save_checkpoint` (arrays in their
+    saved order, 0-d arrays as 0-d ndarrays).  Errors as for :func:`load`."""
+    with _open(path, CHECKPOINT_FORMAT) as f:
+        _require(f, ["arrays"], path, "the checkpoint")
+        g = f["arrays"]
+        names = json.loads(g.attrs["names"])
+        _require(g, [str(i) for i in range(len(names))], path, "/arrays")
+        return {name: _read(g[str(i)]) for i, name in enumerate(names)}, json.loads(f.attrs["meta"])

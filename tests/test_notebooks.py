@@ -1,19 +1,19 @@
-"""Notebooks run top to bottom (code cells executed in order, without a Jupyter kernel)."""
+"""Notebooks run top to bottom in a real Jupyter kernel (nbclient), with their small settings."""
 
-import json
 from pathlib import Path
 
-import matplotlib
+import nbformat
 import pytest
-
-matplotlib.use("Agg")
+from nbclient import NotebookClient
 
 NOTEBOOKS = sorted((Path(__file__).resolve().parents[1] / "notebooks").glob("*.ipynb"))
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("path", NOTEBOOKS, ids=[p.name for p in NOTEBOOKS])
-def test_notebook_runs(path):
-    cells = json.loads(path.read_text())["cells"]
-    source = "\n".join("".join(c["source"]) for c in cells if c["cell_type"] == "code")
-    namespace: dict = {}
-    exec(compile(source, str(path), "exec"), namespace)
+def test_notebook_runs(path, tmp_path):
+    nb = nbformat.read(path, as_version=4)
+    client = NotebookClient(nb, timeout=900, kernel_name="python3", resources={"metadata": {"path": str(tmp_path)}})
+    client.execute()  # raises CellExecutionError with the failing cell's traceback
+    errors = [o for c in nb.cells if c.cell_type == "code" for o in c.get("outputs", []) if o.get("output_type") == "error"]
+    assert not errors

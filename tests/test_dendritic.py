@@ -1,0 +1,91 @@
+"""Dendritic builders (paper Figs 6a, 7a): geometry rules, determinism, validation."""
+
+import numpy as np
+import pytest
+
+import socbjax as sj
+
+
+def _arrays(net):
+    return {k: np.asarray(getattr(net, k)) for k in ("positions", "tangents", "segments", "lengths", "attach", "loads")}
+
+
+def _pinned(net):
+    return np.flatnonzero((np.einsum("nii->n", np.asarray(net.position_projector)) > 0.5) & ~np.asarray(net.probe))
+
+
+@pytest.mark.parametrize("dim", [2, 3])
+def test_outcrop_follows_the_growth_rules(dim):
+    gap, ell, angle = 6.0, 0.5, 70.0
+    net = sj.dendritic_outcrop(generations=8, gap=gap, segment_length=ell, branch_angle=angle, dim=dim, seed=3)
+    a = _arrays(net)
+    pos, seg, tan = a["positions"], a["segments"], a["tangents"]
+    chord = np.linalg.norm(pos[seg[:, 1]] - pos[seg[:, 0]], axis=1)
+    np.testing.assert_allclose(chord, a["lengths"], atol=1e-12)  # straight segments
+    assert a["lengths"].min() >= 0.25 * ell - 1e-12 and a["lengths"].max() <= 1.25 * ell + 1e-12
+    assert pos[:, -1].min() >= -1e-12 and pos[:, -1].max() <= gap + 1e-12
+    daughters = np.flatnonzero(a["attach"] != np.arange(net.n_nodes))
+    mothers = a["attach"][daughters]
+    cosines = np.sum(tan[daughters] * tan[mothers], axis=1)
+    np.testing.assert_allclose(np.degrees(np.arccos(cosines)), angle, atol=1e-9)
+    assert np.all(tan[:, -1] > 0)  # nothing grows back toward the probe
+    np.testing.assert_allclose(pos[daughters], pos[mothers], atol=1e-12)
+    ends = _pinned(net)
+    np.testing.assert_allclose(pos[ends, -1], gap, atol=1e-12)  # hinged on the surface
+    assert not np.asarray(net.clamped)[ends].any() and np.asarray(net.moment_free)[ends].all()
+    assert np.asarray(net.probe)[0] and np.asarray(net.clamped)[0]
+    assert net.n_junctions == len(np.unique(np.asarray(net.strand))) - 1  # one junction per daughter strand
+
+
+def test_outcrop_is_deterministic_for_a_seed():
+    a, b = _arrays(sj.dendritic_outcrop(seed=7)), _arrays(sj.dendritic_outcrop(seed=7))
+    for key in a:
+        np.testing.assert_array_equal(a[key], b[key])
+    c = _arrays(sj.dendritic_outcrop(seed=8))
+    assert a["positions"].shape != c["positions"].shape or not np.array_equal(a["positions"], c["positions"])
+
+
+def test_default_outcrop_size():
+    net = sj.dendritic_outcrop()
+    # Reported in the issue's closing note; the paper quotes ~150 µm and ~300 segments.
+    assert 300 <= net.n_segments <= 600 and len(_pinned(net)) >= 10
+    assert np.abs(np.asarray(net.loads)).sum() > 0  # the default lateral perturbation
+
+
+def test_unit_mesh_geometry():
+    net = sj.unit_dendritic_mesh(dim=2)
+    pos, tan = np.asarray(net.positions), np.asarray(net.tangents)
+    assert net.n_junctions == 1
+    daughter = int(np.flatnonzero(np.asarray(net.attach) != np.arange(net.n_nodes))[0])
+    mother = int(np.asarray(net.attach)[daughter])
+    np.testing.assert_allclose(pos[mother], [0.0, 0.5])  # the mother's middle
+    assert np.degrees(np.arccos(tan[daughter] @ tan[mother])) == pytest.approx(70.0)
+    reach = 0.5 / np.cos(np.radians(70.0))  # the daughter grows to the surface by default
+    assert np.asarray(net.lengths)[np.asarray(net.strand) == 1].sum() == pytest.approx(reach)
+    np.testing.assert_allclose(pos[_pinned(net)], [[0.0, 1.0], [reach * np.sin(np.radians(70.0)), 1.0]])
+    short = sj.unit_dendritic_mesh(dim=2, daughter_length=0.5)  # free daughter tip
+    assert len(_pinned(short)) == 1
+
+
+@pytest.mark.parametrize(
+    ("kwargs", "match"),
+    [
+        ({"generations": -1}, "generations"),
+        ({"generations": 2.5}, "generations"),
+        ({"gap": 0.0}, "gap"),
+        ({"growth": -1.0}, "growth"),
+        ({"segment_length": 2.0}, "segment_length"),
+        ({"branch_angle": 190.0}, "branch_angle"),
+        ({"EI": 0.0}, "EI"),
+        ({"dim": 4}, "dim"),
+        ({"perturbation": -1.0}, "perturbation"),
+    ],
+)
+def test_outcrop_bad_input(kwargs, match):
+    with pytest.raises(ValueError, match=match):
+        sj.dendritic_outcrop(**kwargs)
+
+
+def test_outcrop_seed_must_be_an_integer():
+    with pytest.raises(TypeError, match="seed"):
+        sj.dendritic_outcrop(seed=1.5)
