@@ -27,7 +27,6 @@ import numpy as np
 from jax.flatten_util import ravel_pytree
 
 from ._linear import SparseJacobianSolver, jacobian_solver
-from ._sparsity import prepare_structured
 from ._network import Network, _add_direction
 from ._newton import Status
 from ._path import PathSettings, path_run, path_start, path_weights
@@ -35,6 +34,7 @@ from ._quadrature import get_quadrature
 from ._residual import SOCBModel, routed_nodal_force
 from ._result import PHASES, CompressionResult, LimitPoint
 from ._solve import ConvergenceError
+from ._sparsity import prepare_structured
 
 __all__ = ["compress", "probe_network", "strand_perturbation"]
 
@@ -347,93 +347,14 @@ def compress(
         raise ValueError("resume=True needs checkpoint=<path of the checkpoint file>")
     if int(checkpoint_every) < 1:
         raise ValueError(f"checkpoint_every must be a positive number of steps, got {checkpoint_every!r}")
-    loads = jnp.asarray(_loads(network, perturbation))
-    model = SOCBModel(network, get_quadrature(quadrature_order))
-    x0, unravel = ravel_pytree(model.initial_state())
-    zeros = jax.tree_util.tree_map(jnp.zeros_like, model.initial_state())
-    # Path norm: node positions and directors (× mean segment length, so in µm) count;
-    # moments and forces grow along any path and would hide a jump between branches.
-    ell = jnp.mean(network.lengths)
-    geometry = ravel_pytree(
-        eqx.tree_at(
-            lambda st: (st.positions, st.directors), zeros,
-            (jnp.ones_like(network.positions), jnp.full_like(zeros.directors, ell**2)),
-        )
-    )[0]
-    axial = jnp.where(network.probe[:, None, None], jnp.outer(network.probe_direction, network.probe_direction), 0.0)
-    free = eqx.tree_at(lambda n: n.position_projector, network, network.position_projector - axial)
-    settle = _Problem(SOCBModel(free, model.quad), loads, jnp.array([0.0, 0.0]), jnp.array([1.0, 0.0]))
-    backend = jacobian_solver(linear_solver, x0.size)
-    F_settle = settle.make_F(unravel)(x0)
-    if isinstance(backend, SparseJacobianSolver):
-        F_load = _Problem(model, loads, jnp.array([1.0, 0.0]), jnp.array([1.0, 0.1])).make_F(unravel)(x0)
-        linsolver = prepare_structured([lambda y: F_settle(y, 0.5), lambda y: F_load(y, 0.5)], x0, model.structure())
-    else:
-        linsolver = backend.prepare(lambda y: F_settle(y, 0.5), x0)
-    fingerprint = _fingerprint(network, np.asarray(loads), u_max, unload, settings, quadrature_order)
-    chunk = int(checkpoint_every) if (checkpoint or progress) else settings.max_steps
-    bar = _Progress(progress, u_max)
-
-    start, saved, extra, parts = 0, None, {}, []
+    protocol = _Protocol(network, _loads(network, perturbation), u_max, unload, settings, linear_solver, quadrature_order)
+    protocol.checkpoint, protocol.progress = checkpoint, _Progress(progress, u_max)
+    protocol.chunk = int(checkpoint_every) if (checkpoint or progress) else settings.max_steps
     if resume and Path(checkpoint).exists():
-        from ._io import load_checkpoint
-
-        arrays, meta = load_checkpoint(checkpoint)
-        if meta.get("fingerprint") != fingerprint:
-            raise ValueError(f"checkpoint {checkpoint} belongs to a different run (network, loads or settings differ)")
-        start = int(meta["phase_index"])
-        saved = {k[6:]: jnp.asarray(v) for k, v in arrays.items() if k.startswith("carry/")}
-        extra = {k[6:]: v for k, v in arrays.items() if k.startswith("extra/")}
-        parts = [{k[8:]: arrays[f"records/{k[8:]}"] for k in arrays if k.startswith("records/")}] if "records/X" in arrays else []
-
-    def save(index, carry):
-        if not checkpoint:
-            return
-        from ._io import save_checkpoint
-
-        arrays = _carry_to_numpy(carry)
-        arrays.update({f"extra/{k}": np.asarray(v) for k, v in extra.items()})
-        if parts:
-            arrays.update({f"records/{k}": v for k, v in _concat(parts).items()})
-        save_checkpoint(checkpoint, arrays, {"fingerprint": fingerprint, "phase_index": index})
-
-    names = ["settle", "loading"] + (["unloading"] if unload else [])
-    status = Status.CONVERGED
-    for index in range(start, len(names)):
-        if index == 0:
-            problem, scale, x_start = settle, 4.0 * settings.max_step, x0
-        else:
-            u0 = float(extra["u0"])
-            # Unloading stops just short of the settled start: there the strands are straight
-            # again and the stiffness turns singular (the force falls from ~Euler to 0 over a
-            # vanishing displacement), which no step size resolves reliably.
-            ends = (u0, u_max) if index == 1 else (u_max, u0 + _UNLOAD_MARGIN * (u_max - u0))
-            problem = _Problem(model, loads, jnp.array([1.0, ends[0]]), jnp.array([1.0, ends[1]]))
-            scale, x_start = abs(ends[1] - ends[0]), jnp.asarray(parts[-1]["X"][-1])
-        weights = path_weights(x0, geometry, network.n_nodes, scale)
-        carry = saved if (saved is not None and index == start) else _start(problem, x_start, weights, linsolver, settings)
-        u_a, u_b = (0.0, 0.0) if index == 0 else (float(problem.control0[1]), float(problem.control1[1]))
-
-        def report(p, steps, done, name=names[index], u_a=u_a, u_b=u_b):
-            bar(name, u_a + p * (u_b - u_a), steps, done)
-
-        carry = _run_phase(problem, carry, weights, scale, linsolver, settings, chunk, report, lambda c, i=index: save(i, c))
-        status = int(carry["status"])
-        if index == 0:
-            k = int(carry["steps"])
-            x_settled = np.asarray(carry["X"][k - 1]) if k else np.asarray(x0)
-            positions = unravel(jnp.asarray(x_settled)).positions
-            extra["u0"] = float(np.mean(np.asarray((positions - network.positions)[network.probe] @ network.probe_direction)))
-            parts = [dict(X=x_settled[None], U=np.array([extra["u0"]]), SIGN=np.zeros(1), ITER=np.array([k], np.int32), PHASE=np.zeros(1, np.int8))]
-        else:
-            if index == 1:
-                extra["sign_ref"] = float(carry["sign0"])
-                parts[0]["SIGN"] = np.array([extra["sign_ref"]])
-            parts.append(_records(carry, u_a, u_b, index))
-        if status != Status.CONVERGED:
-            break
+        protocol.resume()
+    status = protocol.run()
     options = dict(settings=settings, u_max=u_max, unload=unload, quadrature_order=quadrature_order)
-    result = _package(model, loads, _concat(parts), extra, status, network, parameters, options)
+    result = _package(protocol.model, protocol.loads, _concat(protocol.parts), protocol.extra, status, network, parameters, options)
     if throw and not result.completed:
         err = ConvergenceError(
             f"compress stopped: {result.status_message} (reached u = {result.displacement[-1]:.4g} µm, "
@@ -442,6 +363,113 @@ def compress(
         err.result = result
         raise err
     return result
+
+
+def _path_geometry(model) -> jax.Array:
+    """Norm weights of the state: node positions and directors (× mean segment length, so in
+    µm); moments and forces grow along any path and would hide a jump between branches."""
+    zeros = jax.tree_util.tree_map(jnp.zeros_like, model.initial_state())
+    ell = jnp.mean(model.network.lengths)
+    ones = (jnp.ones_like(zeros.positions), jnp.full_like(zeros.directors, ell**2))
+    return ravel_pytree(eqx.tree_at(lambda st: (st.positions, st.directors), zeros, ones))[0]
+
+
+class _Protocol:
+    """The settle / loading / unloading phases of one compression, with checkpoints."""
+
+    def __init__(self, network, loads, u_max, unload, settings, linear_solver, quadrature_order):
+        self.network, self.loads, self.u_max, self.settings = network, jnp.asarray(loads), u_max, settings
+        self.model = SOCBModel(network, get_quadrature(quadrature_order))
+        self.x0, self.unravel = ravel_pytree(self.model.initial_state())
+        self.geometry = _path_geometry(self.model)
+        axial = jnp.outer(network.probe_direction, network.probe_direction)
+        free = eqx.tree_at(
+            lambda n: n.position_projector, network,
+            network.position_projector - jnp.where(network.probe[:, None, None], axial, 0.0),
+        )  # settle: the probe is free along its direction
+        self.settle = _Problem(SOCBModel(free, self.model.quad), self.loads, jnp.array([0.0, 0.0]), jnp.array([1.0, 0.0]))
+        self.linsolver = self._linear_solver(linear_solver)
+        self.names = ["settle", "loading"] + (["unloading"] if unload else [])
+        self.fingerprint = _fingerprint(network, np.asarray(loads), u_max, unload, settings, quadrature_order)
+        self.start, self.saved, self.extra, self.parts = 0, None, {}, []
+        self.checkpoint, self.progress, self.chunk = None, _Progress(False, u_max), settings.max_steps
+
+    def _linear_solver(self, kind):
+        backend = jacobian_solver(kind, self.x0.size)
+        F_settle = self.settle.make_F(self.unravel)(self.x0)
+        if not isinstance(backend, SparseJacobianSolver):
+            return backend.prepare(lambda y: F_settle(y, 0.5), self.x0)
+        # The pattern must cover both the settle and the loading residuals (probe rows differ).
+        F_load = self._problem(0.0, 0.1).make_F(self.unravel)(self.x0)
+        return prepare_structured([lambda y: F_settle(y, 0.5), lambda y: F_load(y, 0.5)], self.x0, self.model.structure())
+
+    def _problem(self, u_from, u_to):
+        return _Problem(self.model, self.loads, jnp.array([1.0, u_from]), jnp.array([1.0, u_to]))
+
+    def resume(self):
+        from ._io import load_checkpoint
+
+        arrays, meta = load_checkpoint(self.checkpoint)
+        if meta.get("fingerprint") != self.fingerprint:
+            raise ValueError(f"checkpoint {self.checkpoint} belongs to a different run (network, loads or settings differ)")
+        self.start = int(meta["phase_index"])
+        self.saved = {k[6:]: jnp.asarray(v) for k, v in arrays.items() if k.startswith("carry/")}
+        self.extra = {k[6:]: v for k, v in arrays.items() if k.startswith("extra/")}
+        records = {k[8:]: v for k, v in arrays.items() if k.startswith("records/")}
+        self.parts = [records] if "X" in records else []
+
+    def _save(self, index, carry):
+        if not self.checkpoint:
+            return
+        from ._io import save_checkpoint
+
+        arrays = _carry_to_numpy(carry)
+        arrays.update({f"extra/{k}": np.asarray(v) for k, v in self.extra.items()})
+        if self.parts:
+            arrays.update({f"records/{k}": v for k, v in _concat(self.parts).items()})
+        save_checkpoint(self.checkpoint, arrays, {"fingerprint": self.fingerprint, "phase_index": index})
+
+    def _phase(self, index):
+        """(problem, p-scale µm, start state, (u at p = 0, u at p = 1)) of a phase."""
+        if index == 0:
+            return self.settle, 4.0 * self.settings.max_step, self.x0, (0.0, 0.0)
+        u0 = float(self.extra["u0"])
+        # Unloading stops just short of the settled start: there the strands are straight
+        # again and the stiffness turns singular (the force falls from ~Euler to 0 over a
+        # vanishing displacement), which no step size resolves reliably.
+        ends = (u0, self.u_max) if index == 1 else (self.u_max, u0 + _UNLOAD_MARGIN * (self.u_max - u0))
+        return self._problem(*ends), abs(ends[1] - ends[0]), jnp.asarray(self.parts[-1]["X"][-1]), ends
+
+    def _finish(self, index, carry, ends):
+        if index == 0:  # only the settled end state is part of the curve
+            k = int(carry["steps"])
+            x_settled = np.asarray(carry["X"][k - 1]) if k else np.asarray(self.x0)
+            moved = self.unravel(jnp.asarray(x_settled)).positions - self.network.positions
+            self.extra["u0"] = float(np.mean(np.asarray(moved[self.network.probe] @ self.network.probe_direction)))
+            self.parts = [dict(X=x_settled[None], U=np.array([self.extra["u0"]]), SIGN=np.zeros(1), ITER=np.array([k], np.int32), PHASE=np.zeros(1, np.int8))]
+            return
+        if index == 1:
+            self.extra["sign_ref"] = float(carry["sign0"])
+            self.parts[0]["SIGN"] = np.array([self.extra["sign_ref"]])
+        self.parts.append(_records(carry, *ends, index))
+
+    def run(self) -> int:
+        status = Status.CONVERGED
+        for index in range(self.start, len(self.names)):
+            problem, scale, x_start, ends = self._phase(index)
+            weights = path_weights(self.x0, self.geometry, self.network.n_nodes, scale)
+            resumed = self.saved is not None and index == self.start
+            carry = self.saved if resumed else _start(problem, x_start, weights, self.linsolver, self.settings)
+
+            def report(p, steps, done, name=self.names[index], ends=ends):
+                self.progress(name, ends[0] + p * (ends[1] - ends[0]), steps, done)
+
+            carry = _run_phase(problem, carry, weights, scale, self.linsolver, self.settings, self.chunk, report, lambda c, i=index: self._save(i, c))
+            status = int(carry["status"])
+            self._finish(index, carry, ends)
+            if status != Status.CONVERGED:
+                break
+        return status
 
 
 def _package(model, loads, rec, extra, status, network, parameters, options) -> CompressionResult:

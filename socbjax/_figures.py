@@ -1,150 +1,276 @@
-"""Figures of a compression path (matplotlib, Agg backend): force–compression curve with
-loading and unloading, network snapshots, strand-end force curves (paper Fig. 7c) and the
-strand-end force scatter (Fig. 7d).  Every function returns its Figure; ``save_figures``
-writes PNGs atomically.  Units: µm, pN."""
+"""Figures of a compression path: force–displacement curve with loading and unloading,
+network snapshots, strand-end forces against displacement (paper Fig. 7c) and the strand-end
+force distribution at four stages of loading (paper Fig. 7d).  Units: µm, pN.
+
+Figures are drawn with matplotlib's Agg canvas (``matplotlib.figure.Figure`` + ``FigureCanvasAgg``),
+not through pyplot: nothing opens a window, the global backend is left alone and figures need
+no ``plt.close``.  Every ``plot_*`` function draws into ``ax`` when given (a 3D axes for 3D
+snapshots) and returns the Figure; :func:`save_figures` writes PNGs atomically.
+"""
 
 from __future__ import annotations
 
-import os
-import tempfile
+import itertools
 from pathlib import Path
 
 import matplotlib
+import numpy as np
+from matplotlib.backends.backend_agg import FigureCanvasAgg
+from matplotlib.figure import Figure
+from matplotlib.ticker import MaxNLocator
 
-matplotlib.use("Agg")
-import matplotlib.pyplot as plt  # noqa: E402
-import numpy as np  # noqa: E402
+from ._io import _atomic_path
+from ._result import CompressionResult
 
-from ._result import CompressionResult  # noqa: E402
+__all__ = [
+    "loading_regimes",
+    "plot_end_forces",
+    "plot_force_curve",
+    "plot_snapshots",
+    "plot_strand_forces",
+    "save_figures",
+    "snapshot_steps",
+]
 
-__all__ = ["plot_force_curve", "plot_snapshots", "plot_end_forces", "plot_strand_forces", "save_figures", "regime_steps"]
+_LIMIT_MARKERS = {"force_maximum": "v", "force_minimum": "^", "fold": "D", "bifurcation": "*"}
+_STEP_MARKERS = "osD^v<>ph"
 
 
-def _axes(ax, projection=None):
+def _new_axes(ax, three_d: bool = False):
+    """(figure, axes): ``ax`` and its figure, or a new Agg figure with one axes."""
     if ax is not None:
+        if three_d and getattr(ax, "name", "") != "3d":
+            raise ValueError("a 3D network needs a 3D axes: fig.add_subplot(projection='3d')")
         return ax.figure, ax
-    fig = plt.figure(figsize=(6.4, 4.8))
-    return fig, fig.add_subplot(111, projection=projection)
+    fig = Figure(figsize=(6.4, 4.8), layout="constrained")
+    FigureCanvasAgg(fig)
+    return fig, fig.add_subplot(projection="3d" if three_d else None)
 
 
-def plot_force_curve(result: CompressionResult, ax=None):
-    """Probe force (pN, compressive positive) against probe displacement (µm)."""
-    fig, ax = _axes(ax)
-    load, unload = result.loading, result.unloading
-    ax.plot(result.displacement[load], result.force[load], "-", color="C0", label="loading")
-    if unload.any():
-        ax.plot(result.displacement[unload], result.force[unload], "--", color="C3", label="unloading")
-    bad = ~result.stable
-    if bad.any():
-        ax.plot(result.displacement[bad], result.force[bad], "o", mfc="none", color="k", ms=5, label="unstable (det J sign)")
-    for p in result.limit_points:
-        ax.annotate(p.kind.replace("_", " "), (p.displacement, p.force), textcoords="offset points", xytext=(4, 6), fontsize=7)
-        ax.plot([p.displacement], [p.force], "v" if "max" in p.kind else "^", color="C2", ms=6)
-    ax.set_xlabel("probe displacement (µm)")
-    ax.set_ylabel("probe force (pN, compressive +)")
-    ax.set_title("force–compression")
+def _colours(n: int) -> list:
+    if n <= 10:
+        return [f"C{i}" for i in range(n)]
+    return list(matplotlib.colormaps["viridis"](np.linspace(0.0, 0.9, n)))
+
+
+def _check_steps(result: CompressionResult, steps) -> list[int]:
+    """Steps as non-negative indices (negative ones count from the end)."""
+    k = result.n_steps
+    if k == 0:
+        raise ValueError("the result has no recorded steps to plot")
+    out = []
+    for s in np.atleast_1d(np.asarray(steps)).tolist():
+        if int(s) != s or not -k <= s < k:
+            raise IndexError(f"step {s!r} is not a recorded step (0..{k - 1})")
+        out.append(int(s) % k)
+    return out
+
+
+def _step_label(result: CompressionResult, k: int) -> str:
+    """"u = … µm, F = … pN", with round-off noise (below 1e-6 of the path's range) shown as 0."""
+
+    def number(values, x):
+        return f"{0.0 if abs(x) <= 1e-6 * np.max(np.abs(values)) else x:.3g}"
+
+    return f"u = {number(result.displacement, result.displacement[k])} µm, F = {number(result.force, result.force[k])} pN"
+
+
+def snapshot_steps(result: CompressionResult) -> list[int]:
+    """Default snapshot steps, in path order: the start, the peak force, the largest
+    displacement and the end; where these coincide (no unloading) the set is topped up to
+    four with the steps farthest (in index) from those already chosen."""
+    _check_steps(result, [0])
+    k = result.n_steps
+    chosen = list(dict.fromkeys([0, int(np.argmax(result.force)), int(np.argmax(result.displacement)), k - 1]))
+    while len(chosen) < min(4, k):
+        distance = np.min(np.abs(np.arange(k)[:, None] - np.array(chosen)[None, :]), axis=1)
+        chosen.append(int(np.argmax(distance)))
+    return sorted(chosen)
+
+
+def loading_regimes(result: CompressionResult) -> dict[str, int]:
+    """Up to four loading steps (phase ≤ 1), from the force curve, as ``{name: step}``.
+
+    With F₀ the force at the first loading step and F_p the peak (largest) loading force:
+    "pre-stress" is the first step whose force rise F − F₀ reaches 10 % of F_p − F₀;
+    "linear" the step before the peak whose rise is closest to 50 %; "peak" the peak;
+    "collapse" the step of least force after the peak (omitted if the peak is the last
+    loading step).  If the force never rises above F₀, "pre-stress" is the first step.
+    Steps that coincide are listed once, under the first name.
+    """
+    _check_steps(result, [0])
+    idx = np.flatnonzero(result.phase <= 1)
+    if idx.size == 0:
+        raise ValueError("the result has no loading steps (phase ≤ 1)")
+    F = np.asarray(result.force[idx], dtype=float)
+    p = int(np.argmax(F))
+    rise = F[: p + 1] - F[0]
+    top = rise[-1]
+    picks = {
+        "pre-stress": int(np.argmax(rise >= 0.1 * top)) if top > 0 else 0,
+        "linear": int(np.argmin(np.abs(rise - 0.5 * top))) if top > 0 else 0,
+        "peak": p,
+    }
+    if p + 1 < F.size:
+        picks["collapse"] = p + 1 + int(np.argmin(F[p + 1 :]))
+    regimes: dict[str, int] = {}
+    for name, j in picks.items():
+        if int(idx[j]) not in regimes.values():
+            regimes[name] = int(idx[j])
+    return regimes
+
+
+def plot_force_curve(result: CompressionResult, ax=None) -> Figure:
+    """Probe force F (pN, compressive positive) against probe displacement u (µm).
+
+    Loading (phase ≤ 1) solid blue, unloading (phase 2, from the last loading step) dashed red;
+    steps flagged unstable (``~result.stable``: sign(det J) differs from the start's) as
+    hollow black circles; limit points as markers per kind, annotated with their kind.
+    """
+    fig, ax = _new_axes(ax)
+    u, F = np.asarray(result.displacement), np.asarray(result.force)
+    loading, unloading = result.loading, result.unloading
+    ax.plot(u[loading], F[loading], "-", color="C0", lw=1.5, label="loading")
+    if unloading.any():
+        ax.plot(u[unloading], F[unloading], "--", color="C3", lw=1.5, label="unloading")
+    unstable = ~np.asarray(result.stable, bool)
+    if unstable.any():
+        ax.plot(u[unstable], F[unstable], "o", ls="none", mfc="none", mec="k", ms=5, label="unstable (sign det J flipped)")
+    kinds = list(dict.fromkeys(p.kind for p in result.limit_points))
+    for kind in kinds:
+        points = [p for p in result.limit_points if p.kind == kind]
+        marker = _LIMIT_MARKERS.get(kind, "X")
+        ax.plot([p.displacement for p in points], [p.force for p in points], marker, ls="none", color="C2", ms=7,
+                label=kind.replace("_", " "))
+        for p in points:
+            ax.annotate(kind.replace("_", " "), (p.displacement, p.force), textcoords="offset points",
+                        xytext=(4, 6), fontsize=7)
+    ax.set_xlabel("probe displacement u (µm)")
+    ax.set_ylabel("probe force F (pN, compressive +)")
+    ax.set_title("force–displacement")
     ax.legend(fontsize=8)
     return fig
 
 
-def regime_steps(result: CompressionResult) -> list[int]:
-    """Four loading steps for snapshots/scatter: early ('pre-stress', 5 % of the peak
-    displacement), mid-rise (half the peak displacement), the force peak, and the largest
-    displacement (post-peak / collapse)."""
-    idx = np.flatnonzero(result.phase <= 1)
-    u, F = result.displacement[idx], result.force[idx]
-    peak = int(np.argmax(F))
-    picks = [np.argmin(np.abs(u - 0.05 * u[peak])), np.argmin(np.abs(u[: peak + 1] - 0.5 * u[peak])), peak, int(np.argmax(u))]
-    return sorted({int(idx[k]) for k in picks})
+def _chain_order(segments: np.ndarray) -> np.ndarray:
+    """Node indices tracing the segments as polylines (consecutive segments sharing a node
+    join), −1 between polylines (indexes an appended NaN row)."""
+    order: list[int] = []
+    previous_end = None
+    for a, b in segments.tolist():
+        if a != previous_end:
+            if order:
+                order.append(-1)
+            order.append(a)
+        order.append(b)
+        previous_end = b
+    return np.asarray(order, dtype=int)
 
 
-def plot_snapshots(result: CompressionResult, steps=None, ax=None):
-    """Network shapes (segments as straight lines between nodes) at ``steps`` (default
-    :func:`regime_steps`); probe nodes as squares, strand ends on the surface as circles."""
+def plot_snapshots(result: CompressionResult, steps=None, ax=None) -> Figure:
+    """Network shapes (µm) at ``steps`` (default :func:`snapshot_steps`), one colour per step,
+    each segment drawn as the straight chord between its nodes (``positions[k][segments]``);
+    probe nodes as filled squares, strand ends (``result.end_nodes``) as hollow circles.
+    3D axes for a 3D network (``ax`` must then be 3D), 2D otherwise; equal aspect."""
     net = result.network
-    steps = regime_steps(result) if steps is None else [int(s) for s in steps]
-    fig, ax = _axes(ax, "3d" if net.dim == 3 else None)
-    seg = np.asarray(net.segments)
-    for colour, k in enumerate(steps):
-        pos = result.positions[k]
-        lines = np.stack([pos[seg[:, 0]], pos[seg[:, 1]]], axis=1)
-        for j, line in enumerate(lines):
-            label = f"u = {result.displacement[k]:.3g} µm, F = {result.force[k]:.3g} pN" if j == 0 else None
-            ax.plot(*line.T, color=f"C{colour}", lw=1.0, label=label)
-        probe = np.asarray(net.probe)
-        ax.plot(*pos[probe].T, "s", color=f"C{colour}", ms=5)
-        ax.plot(*pos[result.end_nodes].T, "o", color=f"C{colour}", ms=3, mfc="none")
-    names = ["x (µm)", "y (µm)", "z (µm)"][: net.dim]
-    ax.set_xlabel(names[0])
-    ax.set_ylabel(names[1])
-    if net.dim == 3:
-        ax.set_zlabel(names[2])
-        ax.invert_zaxis()  # probe on top, surface below
-    else:
+    steps = snapshot_steps(result) if steps is None else _check_steps(result, steps)
+    three_d = net.dim == 3
+    fig, ax = _new_axes(ax, three_d)
+    order = _chain_order(np.asarray(net.segments))
+    probe = np.flatnonzero(np.asarray(net.probe))
+    ends = np.asarray(result.end_nodes, dtype=int)
+    for j, (colour, k) in enumerate(zip(_colours(len(steps)), steps)):
+        pos = np.asarray(result.positions[k], dtype=float)
+        lines = np.vstack([pos, np.full((1, net.dim), np.nan)])[order]
+        ax.plot(*lines.T, "-", color=colour, lw=1.2, label=_step_label(result, k))
+        if probe.size:
+            ax.plot(*pos[probe].T, "s", ls="none", color=colour, mec="k", ms=6, label=None if j else "probe nodes")
+        if ends.size:
+            ax.plot(*pos[ends].T, "o", ls="none", mfc="none", mec=colour, ms=5, label=None if j else "strand ends")
+    ax.set_xlabel("x (µm)")
+    ax.set_ylabel("y (µm)")
+    if three_d:
+        ax.set_zlabel("z (µm)")
         ax.set_aspect("equal")
-        ax.invert_yaxis()
-    ax.legend(fontsize=7, loc="best")
-    ax.set_title("network snapshots")
+    else:
+        ax.set_aspect("equal", adjustable="datalim")
+    ax.set_title("network shapes")
+    handles, names = ax.get_legend_handles_labels()
+    first = [i for i, name in enumerate(names) if name.startswith("u = ")]  # steps, then markers
+    order = first + [i for i in range(len(names)) if i not in first]
+    ax.legend([handles[i] for i in order], [names[i] for i in order], fontsize=7, loc="upper left",
+              bbox_to_anchor=(1.02, 1.0), borderaxespad=0.0)
     return fig
 
 
-def plot_end_forces(result: CompressionResult, steps=None, ax=None):
-    """Paper Fig. 7d: axial force on every strand end (pN, compressive +) at ``steps``
-    (default :func:`regime_steps`); x is the strand-end index."""
-    steps = regime_steps(result) if steps is None else [int(s) for s in steps]
-    fig, ax = _axes(ax)
+def plot_end_forces(result: CompressionResult, steps=None, ax=None) -> Figure:
+    """Paper Fig. 7d: the axial force (pN, compressive positive) on every strand end against
+    the strand-end index 0..E−1 (into ``result.end_nodes``), one marker per step.  Default
+    steps: the loading regimes of :func:`loading_regimes` (pre-stress, linear, peak, collapse)."""
+    if steps is None:
+        labelled = [(f"{name}: ", k) for name, k in loading_regimes(result).items()]
+    else:
+        labelled = [("", k) for k in _check_steps(result, steps)]
+    fig, ax = _new_axes(ax)
     x = np.arange(result.end_forces.shape[1])
-    for marker, k in zip("osD^v<>", steps):
-        ax.plot(x, result.end_forces[k], marker, mfc="none", ls="none", label=f"u = {result.displacement[k]:.3g} µm")
-    ax.axhline(0.0, color="0.7", lw=0.8)
-    ax.set_xlabel("strand end (index)")
+    markers = itertools.cycle(_STEP_MARKERS)
+    for colour, marker, (name, k) in zip(_colours(len(labelled)), markers, labelled):
+        ax.plot(x, result.end_forces[k], marker, ls="none", mfc="none", mec=colour, ms=6,
+                label=name + _step_label(result, k))
+    ax.axhline(0.0, color="0.6", lw=0.8, zorder=0)
+    ax.set_xlim(-0.5, max(len(x), 1) - 0.5)
+    ax.xaxis.set_major_locator(MaxNLocator(integer=True))
+    ax.set_xlabel("strand end (index into end_nodes)")
     ax.set_ylabel("end force (pN, compressive +)")
     ax.set_title("strand-end forces")
     ax.legend(fontsize=8)
     return fig
 
 
-def plot_strand_forces(result: CompressionResult, strands=None, ax=None):
-    """Paper Fig. 7c: probe force and strand-end force curves against displacement (loading);
-    default strand ends: the 6 with the largest force range."""
-    fig, ax = _axes(ax)
-    load = result.phase <= 1
-    u = result.displacement[load]
-    ax.plot(u, result.force[load], "k-", lw=2, label="probe")
-    ends = result.end_forces[load]
+def plot_strand_forces(result: CompressionResult, strands=None, ax=None) -> Figure:
+    """Paper Fig. 7c: the probe force and strand-end forces (pN, compressive positive) against
+    probe displacement (µm) over the loading steps (phase ≤ 1).  ``strands``: strand-end
+    indices into ``result.end_nodes`` (default: the 6 with the largest force range)."""
+    loading = result.loading
+    u = np.asarray(result.displacement)[loading]
+    ends = np.asarray(result.end_forces)[loading]
+    n_ends = ends.shape[1]
     if strands is None:
-        strands = np.argsort(-(ends.max(axis=0) - ends.min(axis=0)))[:6] if ends.size else []
-    for j in strands:
-        ax.plot(u, ends[:, j], lw=1, label=f"end {j} (node {result.end_nodes[j]})")
-    ax.set_xlabel("probe displacement (µm)")
+        span = np.ptp(ends, axis=0) if ends.size else np.zeros(n_ends)
+        strands = np.argsort(-span, kind="stable")[:6]
+    strands = [int(j) for j in np.atleast_1d(np.asarray(strands, dtype=int))]
+    if any(not 0 <= j < n_ends for j in strands):
+        raise IndexError(f"strand-end indices {strands} outside 0..{n_ends - 1} (indices into result.end_nodes)")
+    fig, ax = _new_axes(ax)
+    ax.plot(u, np.asarray(result.force)[loading], "-", color="k", lw=2.0, label="probe")
+    for colour, j in zip(_colours(len(strands)), strands):
+        ax.plot(u, ends[:, j], "-", color=colour, lw=1.0, label=f"end {j} (node {int(result.end_nodes[j])})")
+    ax.set_xlabel("probe displacement u (µm)")
     ax.set_ylabel("force (pN, compressive +)")
     ax.set_title("probe and strand-end forces (loading)")
     ax.legend(fontsize=7)
     return fig
 
 
-def _save_atomic(fig, path: Path) -> Path:
-    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".png")
-    os.close(fd)
-    try:
-        fig.savefig(tmp, dpi=130, bbox_inches="tight")
-        os.replace(tmp, path)
-    finally:
-        if os.path.exists(tmp):
-            os.remove(tmp)
-        plt.close(fig)
-    return path
-
-
-def save_figures(result: CompressionResult, out_dir, *, steps=None) -> list[Path]:
-    """Write force_curve.png, snapshots.png, strand_forces.png, end_forces.png into
-    ``out_dir`` (created if needed); returns their paths."""
-    out = Path(out_dir)
+def save_figures(result: CompressionResult, out_dir, *, steps=None, dpi: int = 150) -> list[Path]:
+    """Write force_curve.png, snapshots.png, end_forces.png and strand_forces.png into
+    ``out_dir`` (created with its parents if needed), each atomically (temporary file, then
+    ``os.replace``); returns their paths.  ``steps`` is passed to :func:`plot_snapshots` and
+    :func:`plot_end_forces`."""
+    out = Path(out_dir).expanduser()
     out.mkdir(parents=True, exist_ok=True)
-    figures = {
-        "force_curve": plot_force_curve(result),
-        "snapshots": plot_snapshots(result, steps),
-        "strand_forces": plot_strand_forces(result),
-        "end_forces": plot_end_forces(result, steps),
+    makers = {
+        "force_curve": lambda: plot_force_curve(result),
+        "snapshots": lambda: plot_snapshots(result, steps),
+        "end_forces": lambda: plot_end_forces(result, steps),
+        "strand_forces": lambda: plot_strand_forces(result),
     }
-    return [_save_atomic(fig, out / f"{name}.png") for name, fig in figures.items()]
+    paths = []
+    for name, make in makers.items():
+        fig = make()
+
+        def write(tmp: Path, fig=fig) -> None:
+            fig.savefig(tmp, format="png", dpi=dpi, bbox_inches="tight")
+
+        paths.append(_atomic_path(out / f"{name}.png", write))
+    return paths

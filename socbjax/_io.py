@@ -40,7 +40,7 @@ import numpy as np
 from ._network import Network
 from ._result import PHASES, CompressionResult, LimitPoint
 
-__all__ = ["save", "load", "save_checkpoint", "load_checkpoint", "FORMAT_VERSION", "UNITS"]
+__all__ = ["FORMAT_VERSION", "UNITS", "load", "load_checkpoint", "save", "save_checkpoint"]
 
 FORMAT_VERSION = 1
 RESULT_FORMAT = "socbjax.compression"
@@ -130,25 +130,20 @@ def _fsync(path: Path, directory: bool = False) -> None:
         os.close(fd)
 
 
-def _atomic_write(path, fill, fmt: str) -> Path:
-    """Create an HDF5 file stamped with ``fmt`` at a temporary name, ``fill(file)`` it, then
-    rename it onto ``path``; on any exception remove the temporary file and re-raise."""
-    from . import __version__
-
+def _atomic_path(path, write) -> Path:
+    """Call ``write(tmp)`` to create the file at a temporary path ``.<name>.<random>.tmp`` in
+    the target's folder, flush it to disk and rename it onto ``path`` (``os.replace``); on any
+    exception (KeyboardInterrupt included) remove the temporary file and re-raise, leaving a
+    previous file at ``path`` untouched.  Returns ``path`` as a :class:`Path`."""
     path = Path(path).expanduser()
     if not path.parent.is_dir():
         raise FileNotFoundError(errno.ENOENT, "cannot write: folder does not exist (create it first)", str(path.parent))
     if path.is_dir():
-        raise IsADirectoryError(errno.EISDIR, "is a folder; give a file name such as result.h5", str(path))
+        raise IsADirectoryError(errno.EISDIR, "is a folder; give a file name", str(path))
     with tempfile.NamedTemporaryFile(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp", delete=False) as tmp:
         tmp_path = Path(tmp.name)
     try:
-        with h5py.File(tmp_path, "w") as f:
-            f.attrs["format"] = fmt
-            f.attrs["format_version"] = FORMAT_VERSION
-            f.attrs["socbjax_version"] = __version__
-            f.attrs["created"] = datetime.datetime.now(datetime.timezone.utc).isoformat(timespec="seconds")
-            fill(f)
+        write(tmp_path)
         _fsync(tmp_path)
         os.chmod(tmp_path, _new_file_mode(path))
         os.replace(tmp_path, path)
@@ -157,6 +152,21 @@ def _atomic_write(path, fill, fmt: str) -> Path:
         raise
     _fsync(path.parent, directory=True)
     return path
+
+
+def _atomic_write(path, fill, fmt: str) -> Path:
+    """Atomically write an HDF5 file stamped with ``fmt`` and filled by ``fill(file)``."""
+    from . import __version__
+
+    def write(tmp_path: Path) -> None:
+        with h5py.File(tmp_path, "w") as f:
+            f.attrs["format"] = fmt
+            f.attrs["format_version"] = FORMAT_VERSION
+            f.attrs["socbjax_version"] = __version__
+            f.attrs["created"] = datetime.datetime.now(datetime.UTC).isoformat(timespec="seconds")
+            fill(f)
+
+    return _atomic_path(path, write)
 
 
 def _open(path, fmt: str) -> h5py.File:
@@ -287,12 +297,16 @@ def load(path) -> CompressionResult:
     a socbjax compression result, is damaged, or has a newer ``format_version``.
     """
     with _open(path, RESULT_FORMAT) as f:
-        _require(f, ["path", "limit_points", "network"], path, "the file")
+        _require(f, ["path", "network"], path, "the file")
         fields = _path_fields()
         _require(f["path"], fields, path, "/path")
+        if "limit_points" in f:
+            points = _read_limit_points(f["limit_points"], path)
+        else:  # files of socbjax 0.1.0 before the /limit_points group: a JSON attribute
+            points = [LimitPoint(**p) for p in json.loads(f.attrs.get("limit_points", "[]"))]
         return CompressionResult(
             **{name: _read(f["path"][name]) for name in fields},
-            limit_points=_read_limit_points(f["limit_points"], path),
+            limit_points=points,
             status=int(f.attrs["status"]),
             network=_read_network(f["network"], path),
             parameters=json.loads(f.attrs["parameters"]),
@@ -328,6 +342,9 @@ def load_checkpoint(path) -> tuple[dict[str, np.ndarray], dict]:
     with _open(path, CHECKPOINT_FORMAT) as f:
         _require(f, ["arrays"], path, "the checkpoint")
         g = f["arrays"]
+        meta = json.loads(f.attrs["meta"])
+        if "names" not in g.attrs:  # early 0.1.0 checkpoints: datasets named by key, "/" as "|"
+            return {key.replace("|", "/"): _read(g[key]) for key in g}, meta
         names = json.loads(g.attrs["names"])
         _require(g, [str(i) for i in range(len(names))], path, "/arrays")
-        return {name: _read(g[str(i)]) for i, name in enumerate(names)}, json.loads(f.attrs["meta"])
+        return {name: _read(g[str(i)]) for i, name in enumerate(names)}, meta

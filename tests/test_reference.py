@@ -8,8 +8,14 @@ import numpy as np  # noqa: E402
 import pytest  # noqa: E402
 
 import socbjax._reference as ref  # noqa: E402
+from scipy.optimize import brentq  # noqa: E402
+from scipy.special import ellipe, ellipj, ellipk  # noqa: E402
+
 from socbjax._reference import (  # noqa: E402
     elastica_cantilever,
+    elastica_column_force,
+    elastica_column_shape,
+    elastica_kinked_cantilever,
     elastica_tip_deflection,
     shoot_elastica,
 )
@@ -188,3 +194,209 @@ def test_float32_mode_raises_clear_error():
             shoot_elastica((0.0, 0.0), 0.0, 1.0, (0.0, 0.0))
     finally:
         jax.config.update("jax_enable_x64", True)
+
+
+# ------------------------------------------------------------ kinked cantilever
+def test_kinked_without_kink_reproduces_cantilever():
+    F = np.array([0.7, -2.1])
+    kinked = elastica_kinked_cantilever(F, lengths=(0.4, 0.6), kink_angle=0.0, n_output=5)
+    straight = elastica_cantilever(F, n_output=11)  # s = 0, 0.1, ..., 1
+    np.testing.assert_allclose(kinked.tip_position, straight.tip_position, atol=1e-10)
+    assert float(kinked.tip_angle) == pytest.approx(float(straight.tip_angle), abs=1e-10)
+    assert float(kinked.base_moment) == pytest.approx(float(straight.base_moment), abs=1e-10)
+    pos, ref_pos = np.asarray(kinked.positions), np.asarray(straight.positions)
+    np.testing.assert_allclose(pos[:5], ref_pos[:5], atol=1e-10)
+    np.testing.assert_allclose(pos[5:], ref_pos[4:], atol=1e-10)
+    np.testing.assert_allclose(kinked.s, np.r_[np.linspace(0, 0.4, 5), np.linspace(0.4, 1, 5)],
+                               atol=1e-15)
+
+
+def _kinked_linear_tip(F, L1, L2, kink, EI1, EI2):
+    """Small-deflection tip displacement and rotation (unit-load method, base along +x)."""
+    t0, t1 = np.array([1.0, 0.0]), np.array([np.cos(kink), np.sin(kink)])
+    tip = L1 * t0 + L2 * t1
+    x, w = np.polynomial.legendre.leggauss(8)
+    u, rot = np.zeros(2), 0.0
+    for start, t, L, EI in [(np.zeros(2), t0, L1, EI1), (L1 * t0, t1, L2, EI2)]:
+        for xi, wi in zip(x, w):
+            d = tip - (start + 0.5 * L * (xi + 1.0) * t)  # lever arm to the tip
+            kappa = (d[0] * F[1] - d[1] * F[0]) / EI     # m(s) = (T - r) × F
+            u += 0.5 * L * wi * kappa * np.array([-d[1], d[0]])  # δT = ∫ κ ẑ × (T - r)
+            rot += 0.5 * L * wi * kappa
+    return tip, u, rot
+
+
+@pytest.mark.parametrize("kink, F", [(0.9, (0.3e-3, 1.0e-3)), (-2.0, (-1.0e-3, 0.2e-3))])
+def test_kinked_small_load_matches_linear_beam_theory(kink, F):
+    F, (L1, L2), (EI1, EI2) = np.asarray(F), (0.7, 1.3), (2.0, 0.5)
+    sol = elastica_kinked_cantilever(F, lengths=(L1, L2), kink_angle=kink, EI=(EI1, EI2))
+    tip0, u, rot = _kinked_linear_tip(F, L1, L2, kink, EI1, EI2)
+    u_sol = np.asarray(sol.tip_position) - tip0
+    assert np.linalg.norm(u_sol - u) <= 1e-3 * np.linalg.norm(u)
+    assert float(sol.tip_angle) - kink == pytest.approx(rot, rel=1e-3)
+    assert sol.converged and sol.end_moment_residual < 1e-12
+
+
+@pytest.mark.parametrize("F", [(0.5, 2.0), (-6.0, 4.0)])
+def test_kinked_corner_and_part_two_as_cantilever(F):
+    # Continuity at the corner, and part 2 is itself a cantilever clamped at the corner.
+    F, n, kink = np.asarray(F), 41, 1.1
+    sol = elastica_kinked_cantilever(F, lengths=(0.7, 1.3), kink_angle=kink, EI=(2.0, 0.5),
+                                     n_output=n)
+    pos, ang, mom = (np.asarray(v) for v in (sol.positions, sol.angle, sol.moment))
+    np.testing.assert_allclose(pos[n - 1], pos[n], atol=0)
+    assert ang[n] - ang[n - 1] == pytest.approx(kink, abs=1e-14)
+    assert mom[n] == mom[n - 1] and abs(mom[-1]) < 1e-9
+    x, y = np.asarray(sol.tip_position)
+    assert float(sol.base_moment) == pytest.approx(x * F[1] - y * F[0], abs=1e-9)
+    part2 = elastica_cantilever(F, length=1.3, EI=0.5, base_angle=ang[n], n_output=n)
+    np.testing.assert_allclose(pos[n:], pos[n] + np.asarray(part2.positions), atol=1e-9)
+    assert float(part2.base_moment) == pytest.approx(mom[n], abs=1e-9)
+
+
+@pytest.mark.parametrize("alpha", [0.4, -2.3])
+def test_kinked_base_angle_rotates_solution(alpha):
+    F, kw = np.array([1.5, -3.0]), dict(lengths=(0.6, 0.9), kink_angle=-0.8, EI=(1.0, 1.7))
+    base = elastica_kinked_cantilever(F, **kw)
+    rot = elastica_kinked_cantilever(_rot(alpha) @ F, base_angle=alpha, **kw)
+    np.testing.assert_allclose(rot.positions, np.asarray(base.positions) @ _rot(alpha).T,
+                               atol=1e-9)
+    np.testing.assert_allclose(rot.angle, np.asarray(base.angle) + alpha, atol=1e-9)
+    assert float(rot.base_moment) == pytest.approx(float(base.base_moment), abs=1e-9)
+
+
+def test_kinked_large_load_uses_ramp_and_converges():
+    F = 40.0 * np.array([0.3, 1.0]) / np.hypot(0.3, 1.0)  # |F| Lt²/min(EI) = 320
+    sol = elastica_kinked_cantilever(F, lengths=(0.7, 1.3), kink_angle=1.1, EI=(2.0, 2.5))
+    assert sol.converged and sol.end_moment_residual < 1e-9
+    x, y = np.asarray(sol.tip_position)
+    assert float(sol.base_moment) == pytest.approx(x * F[1] - y * F[0], abs=1e-8)
+    assert np.all(np.diff(np.asarray(sol.angle)[:101]) >= 0)  # bends towards the load
+
+
+@pytest.mark.parametrize("kwargs, match", [
+    (dict(lengths=(1.0, 0.0)), "lengths must be positive"),
+    (dict(lengths=(1.0, 2.0, 3.0)), "lengths must have shape"),
+    (dict(EI=(1.0, -1.0)), "EI must be positive"),
+    (dict(EI=(1.0, 2.0, 3.0)), "EI must have shape"),
+    (dict(kink_angle=np.nan), "kink_angle must be finite"),
+    (dict(tip_force=(1.0,)), "tip_force must have shape"),
+    (dict(n_output=1), "n_output must be an integer"),
+])
+def test_kinked_input_validation(kwargs, match):
+    args = dict(tip_force=(0.0, 1.0), kink_angle=0.5) | kwargs
+    with pytest.raises(ValueError, match=match):
+        elastica_kinked_cantilever(args.pop("tip_force"), **args)
+
+
+# ------------------------------------------------------------ post-buckled columns
+def _pp_closed_form(delta):
+    """Pinned-pinned, L = EI = 1: Δ/L = 2(1 - E/K) -> (P = 4K², k) (scipy m = k²)."""
+    k = brentq(lambda k: 2.0 * (1.0 - ellipe(k * k) / ellipk(k * k)) - delta, 1e-12,
+               1.0 - 1e-12, xtol=1e-15, rtol=1e-15)
+    return 4.0 * ellipk(k * k) ** 2, k
+
+
+DELTAS = np.array([0.9, 1e-4, 0.05, 0.3, 1e-3, 0.6, 0.3])  # unsorted, with a duplicate
+
+
+@pytest.mark.parametrize("supports, p_scale, l_scale", [
+    (("pinned", "pinned"), 1.0, 1.0),    # P = 4K² EI/L²
+    (("clamped", "clamped"), 4.0, 0.5),  # = pinned-pinned of length L/2
+    (("clamped", "free"), 0.25, 2.0),    # = pinned-pinned of length 2L, same Δ/L
+])
+def test_column_force_matches_closed_form(supports, p_scale, l_scale):
+    L, EI = 2.5, 0.8
+    P = elastica_column_force(DELTAS * L, supports=supports, length=L, EI=EI)
+    exact = np.array([p_scale * _pp_closed_form(d)[0] * EI / L**2 for d in DELTAS])
+    assert P.shape == DELTAS.shape and P[3] == P[6]
+    np.testing.assert_allclose(P, exact, rtol=1e-8)
+
+
+@pytest.mark.parametrize("supports, lam", [
+    (("pinned", "pinned"), lambda K: 2 * K),
+    (("clamped", "clamped"), lambda K: 4 * K),
+    (("clamped", "free"), lambda K: K),
+])
+@pytest.mark.parametrize("delta", [0.02, 0.7])
+def test_column_shape_matches_closed_form(supports, lam, delta):
+    # Pendulum analogy (L = EI = 1): with u = λ s, λ = √P, sin(θ/2) = k sn(u) for
+    # the clamped ends (θ(0) = 0), y = (2k/λ)(1 - cn(λ s)); pinned-pinned is the same
+    # curve shifted by a quarter wave: y = (2k/λ) cn(K - λ s). y(1/2) = k/K in all cases.
+    (P_pp, k), n = _pp_closed_form(delta), 41
+    K = ellipk(k * k)
+    sol = elastica_column_shape(delta, supports=supports, n_output=n)
+    s, lmb = np.linspace(0.0, 1.0, n), lam(K)
+    if supports[0] == "pinned":
+        y = 2 * k / lmb * ellipj(K - lmb * s, k * k)[1]
+    else:
+        y = 2 * k / lmb * (1.0 - ellipj(lmb * s, k * k)[1])
+    np.testing.assert_allclose(np.asarray(sol.positions)[:, 1], y, atol=1e-9)
+    assert sol.midspan_deflection == pytest.approx(k / K, abs=1e-9)
+    assert sol.axial_force == pytest.approx(lmb**2, rel=1e-8)
+    assert float(sol.positions[-1, 0]) == pytest.approx(1.0 - delta, abs=1e-10)
+    assert sol.lateral_force == pytest.approx(0.0, abs=1e-7) and sol.residual < 1e-9
+    np.testing.assert_allclose(np.asarray(sol.positions[0]), 0.0, atol=0)
+
+
+def test_clamped_pinned_small_shortening_limit():
+    # Euler load of the clamped-pinned column: P = x² EI/L² with tan x = x, x ≈ 4.4934.
+    x = brentq(lambda x: np.tan(x) - x, 4.4, 4.6, xtol=1e-15)
+    L, EI = 1.7, 2.3
+    d = np.array([1e-5, 2e-5])
+    P = elastica_column_force(d * L, supports=("clamped", "pinned"), length=L, EI=EI)
+    P0 = 2 * P[0] - P[1]  # P = P_cr + c Δ + O(Δ²)
+    assert P0 * L**2 / EI == pytest.approx(x**2, rel=1e-8)
+    assert P0 * L**2 / EI == pytest.approx(20.1907, abs=1e-4)
+    assert np.all(P > P0)  # the post-buckling path rises initially
+
+
+def test_clamped_pinned_equals_mirrored_pinned_clamped():
+    # Same column shot from the other end: equal P, mirrored shape, P → tensile late.
+    d, n = np.array([0.01, 0.3, 0.6, 0.9]), 51
+    cp = elastica_column_force(d, supports=("clamped", "pinned"))
+    pc = elastica_column_force(d, supports=("pinned", "clamped"))
+    np.testing.assert_allclose(cp, pc, rtol=1e-9, atol=1e-9)
+    assert np.all(np.diff(cp[1:]) < 0) and cp[-1] < 0 < cp[-2]
+    a = elastica_column_shape(0.6, supports=("clamped", "pinned"), n_output=n)
+    b = elastica_column_shape(0.6, supports=("pinned", "clamped"), n_output=n)
+    pa, pb = np.asarray(a.positions), np.asarray(b.positions)
+    np.testing.assert_allclose(pb[::-1], np.c_[0.4 - pa[:, 0], pa[:, 1]], atol=1e-9)
+    assert a.axial_force == pytest.approx(cp[2], rel=1e-10)
+    # base moment balances the moment of the end force (-P, Q) applied at (L - Δ, 0)
+    assert float(a.moment[0]) == pytest.approx(0.4 * a.lateral_force, rel=1e-9)
+    assert float(a.moment[-1]) == pytest.approx(0.0, abs=1e-9)
+    assert float(a.angle[0]) == 0.0 and abs(float(pa[-1, 1])) < 1e-10
+
+
+def test_column_scaling_and_branch_independent_of_sampling():
+    sup = ("clamped", "pinned")
+    alone = elastica_column_force(0.9, supports=sup)
+    dense = elastica_column_force(np.linspace(0.01, 0.9, 30), supports=sup)
+    assert alone.shape == () and float(alone) == pytest.approx(dense[-1], rel=1e-10)
+    scaled = elastica_column_force(0.9 * 3.0, supports=sup, length=3.0, EI=2.0)
+    assert float(scaled) == pytest.approx(float(alone) * 2.0 / 9.0, rel=1e-10)
+
+
+@pytest.mark.parametrize("kwargs, match", [
+    (dict(end_shortening=0.0), "0 < Δ < length"),
+    (dict(end_shortening=[0.1, 1.0]), "0 < Δ < length"),
+    (dict(end_shortening=np.nan), "0 < Δ < length"),
+    (dict(end_shortening=[[0.1]]), "scalar or a non-empty 1-D"),
+    (dict(supports=("pinned", "free")), "mechanism"),
+    (dict(supports=("free", "pinned")), "supports must be"),
+    (dict(supports="pinned"), "supports must be a pair"),
+    (dict(length=-1.0), "length must be positive"),
+    (dict(EI=0.0), "EI must be positive"),
+])
+def test_column_input_validation(kwargs, match):
+    args = dict(end_shortening=0.1) | kwargs
+    with pytest.raises(ValueError, match=match):
+        elastica_column_force(args.pop("end_shortening"), **args)
+
+
+def test_column_shape_input_validation():
+    with pytest.raises(ValueError, match="must be a scalar here"):
+        elastica_column_shape([0.1, 0.2])
+    with pytest.raises(ValueError, match="n_output must be an integer"):
+        elastica_column_shape(0.1, n_output=1)
