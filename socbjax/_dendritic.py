@@ -17,8 +17,10 @@ Reading of the paper where it is ambiguous (documented choices):
   Filaments stopped at the surface no longer branch.
 * Growth: after branching, every filament that has not stopped (old and new) grows by
   ``growth`` µm in straight segments of ``segment_length``.  A filament that would cross the
-  surface is cut exactly at it; a last piece shorter than ¼ ``segment_length`` is merged into
-  the previous segment (no near-zero segments).  Generation 1 grows the first mother only.
+  surface is cut exactly at it (one that would end within ¼ ``segment_length`` of the surface
+  is grown onto it at once); a last piece shorter than ¼ ``segment_length`` is merged into
+  the previous segment, so no segment is shorter than ¼ or longer than 1¼ ``segment_length``
+  (except a daughter born within ¼ segment of the surface).  Generation 1 grows the first mother only.
 * Daughters with a non-positive component along +z (heading back toward the probe) are
   redrawn with a new random azimuth (3D) or the other side (2D).
 * Perturbation: a lateral force (pN) on the middle node of every strand, perpendicular to it,
@@ -103,7 +105,8 @@ def _pieces(length, segment_length):
     count = max(int(np.ceil(length / segment_length - 1e-9)), 1)
     pieces = [segment_length] * (count - 1) + [length - segment_length * (count - 1)]
     if len(pieces) > 1 and pieces[-1] < 0.25 * segment_length:
-        pieces[-2] += pieces.pop()
+        last = pieces.pop()
+        pieces[-1] += last
     return pieces
 
 
@@ -235,9 +238,12 @@ def dendritic_outcrop(
                 continue
             height = g.pos[s["tip"]][-1]
             to_surface = (gap - height) / s["direction"][-1]
-            length = min(growth, to_surface)
+            # A filament that would stop within ¼ segment of the surface next time reaches it now
+            # (no sliver segments at the surface).
+            reaches = to_surface <= growth + 0.25 * ell
+            length = to_surface if reaches else growth
             s["tip"] = g.grow(s["tip"], s["direction"], _pieces(length, ell), strand=k)
-            if to_surface <= growth + 1e-12:
+            if reaches:
                 s["stopped"] = True
                 g.pos[s["tip"]][-1] = gap  # exactly on the surface
                 g.pinned.append(s["tip"])

@@ -18,8 +18,22 @@ loads ``|F| L²/EI > 1`` are reached by a geometric load ramp with branch tracki
 (quasi-static loading). Shooting sensitivity grows like ``exp(sqrt(|F| L²/EI))``; the
 default path is validated for ``|F| L²/EI <= 100`` (perpendicular tip load).
 
+:func:`elastica_kinked_cantilever` is the same cantilever made of two straight parts
+(lengths and ``EI`` each) joined by a rigid corner: the tangent angle jumps by
+``kink_angle`` while position and moment are continuous; same shooting, scan and load
+ramp, on ``m(0)`` with the end moment of part 2 as residual.
+
+:func:`elastica_column_force` / :func:`elastica_column_shape` solve the post-buckled
+column of the socbjax column builder (node 0 at the origin, axis +x, last node pushed
+to ``x(L) = L - Δ``; supports clamped/pinned first, clamped/pinned/free last) on the
+first-mode branch. Dimensionless (``L = EI = 1``) shooting with state ``(s - x, y, θ,
+m)`` (no cancellation at small ``Δ``), internal force ``(-P, Q)``, unknowns base
+moment or angle, ``P`` and ``Q`` scaled by ``√δ`` (``δ = Δ/L``), three-component
+``optimistix.Newton``; continuation in ``√δ`` from the linear buckling mode (smallest
+root of the 4×4 boundary determinant) through the sorted inputs.
+
 Public functions validate inputs on the host (not for use inside ``jax.jit``); the
-numerical cores are jitted once per ``n_output`` and reused.
+numerical cores are jitted once (per residual, per ``n_output``) and reused.
 """
 
 from __future__ import annotations
@@ -148,7 +162,7 @@ def _scan_jit(fn, args, us):
 @eqx.filter_jit
 def _bisect_jit(fn, args, lower, upper, tol):
     sol = optx.root_find(fn, optx.Bisection(rtol=tol, atol=tol), 0.5 * (lower + upper),
-                         args, options=dict(lower=lower, upper=upper), max_steps=128,
+                         args, options={"lower": lower, "upper": upper}, max_steps=128,
                          throw=False)  # stalls at round-off: keep the last midpoint
     return sol.value
 
@@ -184,7 +198,7 @@ def shoot_elastica(base_position, base_angle, base_moment, force, *, length: flo
     L, stiff = _checked("length", length, positive=True), _checked("EI", EI, positive=True)
     rt, at = _checked("rtol", rtol, positive=True), _checked("atol", atol, positive=True)
     n = _count("n_output", n_output)
-    a = lambda v: jnp.asarray(v, dtype=jnp.float64)  # noqa: E731
+    a = lambda v: jnp.asarray(v, dtype=jnp.float64)
     ys = _shoot_jit(a([r0[0], r0[1], th0, m0]), a(f), a(L), a(stiff), a(rt), a(at), n)
     if not bool(jnp.all(jnp.isfinite(ys))):
         raise RuntimeError(f"shoot_elastica: integration failed (base_moment={m0}, "
@@ -225,7 +239,7 @@ def _solve_base_moment(fn, args, u0: float, p: float, ramp: bool) -> float:
     """
     if not ramp or p <= _P_DIRECT:
         return _root_near(fn, args, u0, 1.02 * p, None)
-    scaled = lambda lam: (args[0], args[1] * lam, *args[2:])  # noqa: E731
+    scaled = lambda lam: (args[0], args[1] * lam, *args[2:])
     n_steps = int(np.ceil(np.log(p / _P_DIRECT) / np.log(_RAMP_RATIO))) + 2
     lams = np.geomspace(_P_DIRECT / (_RAMP_RATIO * p), 1.0, n_steps)
     us = [_root_near(fn, scaled(lam), u0 * lam, 1.02 * p * lam, None) for lam in lams[:2]]
@@ -280,7 +294,7 @@ def elastica_cantilever(tip_force, *, length: float = 1.0, EI: float = 1.0,
         m_guess = L * (np.cos(th0) * f[1] - np.sin(th0) * f[0])
     else:
         m_guess = _checked("base_moment_guess", base_moment_guess)
-    a = lambda v: jnp.asarray(v, dtype=jnp.float64)  # noqa: E731
+    a = lambda v: jnp.asarray(v, dtype=jnp.float64)
     u = _solve_base_moment(_end_moment, (a([0.0, 0.0, th0]), a(f), a(L), a(stiff), a(tol)),
                            m_guess * L / stiff, float(np.linalg.norm(f)) * L**2 / stiff,
                            ramp=base_moment_guess is None)
@@ -377,7 +391,7 @@ def elastica_kinked_cantilever(tip_force, *, lengths=(0.5, 0.5), kink_angle: flo
         m_guess = tip0[0] * f[1] - tip0[1] * f[0]
     else:
         m_guess = _checked("base_moment_guess", base_moment_guess)
-    a = lambda v: jnp.asarray(v, dtype=jnp.float64)  # noqa: E731
+    a = lambda v: jnp.asarray(v, dtype=jnp.float64)
     Lt = L1 + L2
     args = (a([0.0, 0.0, th0]), a(f), a([L1, L2]), a([EI1, EI2]), a(kink), a(tol))
     u = _solve_base_moment(_kinked_end_moment, args, m_guess * Lt / EI1,
@@ -394,7 +408,7 @@ def elastica_kinked_cantilever(tip_force, *, lengths=(0.5, 0.5), kink_angle: flo
         raise RuntimeError(f"elastica_kinked_cantilever did not converge for tip_force="
                            f"{f.tolist()} pN (lengths={[L1, L2]}, EI={[EI1, EI2]}, "
                            f"kink_angle={kink}): |m(L)| = {residual:.3e} pN·µm")
-    cat = lambda p, q: jnp.concatenate([p, q])  # noqa: E731
+    cat = lambda p, q: jnp.concatenate([p, q])
     return ElasticaSolution(
         s=cat(one.s, L1 + two.s), positions=cat(one.positions, two.positions),
         angle=cat(one.angle, two.angle), moment=cat(one.moment, two.moment), force=one.force,
@@ -491,7 +505,7 @@ def _column_mode(first: str, last: str) -> np.ndarray:
         return np.array([[1, 0, 1, 0], [0, 1, 0, k] if first == "clamped" else
                          [0, 0, -k2, 0], *end], dtype=np.float64)
 
-    det = lambda k: np.linalg.det(bcs(k))  # noqa: E731
+    det = lambda k: np.linalg.det(bcs(k))
     ks = np.linspace(0.5, 10.0, 400)
     vals = np.array([det(k) for k in ks])
     i = int(np.nonzero(vals[:-1] * vals[1:] <= 0.0)[0][0])
@@ -634,7 +648,7 @@ def elastica_column_shape(end_shortening: float, *, supports=("pinned", "pinned"
     n = _count("n_output", n_output)
     d = float(d)
     z = _column_branch(np.array([d]), first, last, tol)[0]
-    a = lambda v: jnp.asarray(v, dtype=jnp.float64)  # noqa: E731
+    a = lambda v: jnp.asarray(v, dtype=jnp.float64)
     flags, args = _column_flags(first, last), (a(z), a(d))
     v = np.asarray(_column_states_jit(*args, flags, a(tol), jnp.linspace(0.0, 1.0, n)))
     mid = float(_column_states_jit(*args, flags, a(tol), jnp.full(1, 0.5))[0, 1]) * L
