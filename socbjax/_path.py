@@ -236,7 +236,10 @@ def path_run(make_F, carry: dict, weights, p_scale, linsolver, settings: PathSet
         new["attempts"] = c["attempts"] + 1
         new["cutbacks"] = c["cutbacks"] + (~ok).astype(jnp.int32)
         new["iterations"] = c["iterations"] + it
-        new["rejected_by_sign"] = jnp.where(ok, False, sign_flip)
+        # A fold ahead: some rejection since the last accepted step crossed it (det J sign or
+        # a backward tangent), or the path is nearly vertical in p (|dp/ds| p_scale < 0.1).
+        near_fold = (settings.method != "arclength") & (jnp.abs(c["tau"][-1]) * p_scale < 0.1)
+        new["rejected_by_sign"] = jnp.where(ok, False, c["rejected_by_sign"] | sign_flip | near_fold)
         idx = jnp.minimum(k, settings.max_steps - 1)
         for name, value in (("X", x1), ("P", p1), ("SIGN", sign), ("TAU_P", tau1[-1]), ("ITER", it)):
             new[name] = jnp.where(ok, c[name].at[idx].set(value), c[name])
