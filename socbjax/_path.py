@@ -139,9 +139,8 @@ def _bordered_newton(F, x, p, g, linsolver, settings):
         return x1, p1, r1, h1, it, status.astype(jnp.int32), sign, c
 
     r0, h0 = residuals(x, p)
-    init = (x, p, r0, h0, jnp.zeros((), jnp.int32), jnp.asarray(_RUNNING, jnp.int32), jnp.zeros((), x.dtype), jnp.zeros_like(x))
-    init_status = jnp.where(jnp.all(jnp.isfinite(r0)), _RUNNING, Status.NONFINITE).astype(jnp.int32)
-    init = init[:5] + (init_status,) + init[6:]
+    status0 = jnp.where(jnp.all(jnp.isfinite(r0)), _RUNNING, Status.NONFINITE).astype(jnp.int32)
+    init = (x, p, r0, h0, jnp.zeros((), jnp.int32), status0, jnp.zeros((), x.dtype), jnp.zeros_like(x))
     x, p, _, _, it, status, sign, c = jax.lax.while_loop(lambda s: s[5] == _RUNNING, body, init)
     return x, p, status, it, sign, c
 

@@ -106,3 +106,26 @@ def test_junction_validation_errors():
         sj.make_network(bad, tan, segs, lengths, 1.0, attach=[(J, D)], **kw)
     with pytest.raises(ValueError, match="more than two segments"):
         sj.make_network(pos, tan, np.vstack([segs, [[1, 5]]]), np.append(lengths, 0.5), 1.0, **kw)
+
+
+def test_branched_network_is_rotation_equivariant(rng):
+    """The 3D junction rule (minimal rotation of the reference pair) keeps the whole problem
+    equivariant: rotating network and loads rotates the solution."""
+    from conftest import random_rotation
+
+    net, J, D = branched_cantilever(3, n_mother=4, daughter_length=0.6, angle_deg=50.0)
+    n = net.n_nodes
+    loads = {n - 1: [0.3, 1.2, -0.8], 2: [0.0, -0.4, 0.5]}
+    base = sj.solve(net, loads)
+    Q = random_rotation(rng)
+    pos, tan = np.asarray(net.positions) @ Q.T, np.asarray(net.tangents) @ Q.T
+    fixed = [np.eye(3)] + [np.zeros((0, 3))] * (n - 1)
+    clamped = np.zeros(n, bool)
+    clamped[0] = True
+    rotated_net = sj.make_network(pos, tan, np.asarray(net.segments), np.asarray(net.lengths), 1.0, fixed_directions=fixed, clamped=clamped, attach=[(J, D)])
+    rotated = sj.solve(rotated_net, {k: Q @ np.asarray(v) for k, v in loads.items()})
+    np.testing.assert_allclose(np.asarray(rotated.positions), np.asarray(base.positions) @ Q.T, atol=1e-9)
+    np.testing.assert_allclose(np.asarray(rotated.moments), np.asarray(base.moments) @ Q.T, atol=1e-9)
+    # The daughter keeps its branch angle to the mother, however the mother turned.
+    t = np.asarray(base.tangents)
+    assert np.degrees(np.arccos(np.clip(t[J] @ t[D], -1, 1))) == pytest.approx(50.0, abs=1e-9)
