@@ -13,10 +13,15 @@ import jax as _jax
 
 _jax.config.update("jax_enable_x64", True)
 
+from ._afm import ForceCurve, load_curve, save_curve  # noqa: E402
 from ._builders import SUPPORTS, cantilever, column  # noqa: E402
 from ._compress import compress, probe_network, strand_perturbation  # noqa: E402
 from ._dendritic import dendritic_outcrop, unit_dendritic_mesh  # noqa: E402
 from ._continuation import ContinuationResult, ContinuationSettings, load_continuation  # noqa: E402
+from ._fit import FitResult, fit, fit_problem  # noqa: E402
+from ._implicit import implicit_root  # noqa: E402
+from ._models import FIT_MODELS, ColumnModel, FitModel, OutcropModel, UnitMeshModel, make_fit_model  # noqa: E402
+from ._parameters import NUISANCE_PARAMETERS, Parameter  # noqa: E402
 from ._figures import plot_end_forces, plot_force_curve, plot_snapshots, plot_strand_forces, save_figures  # noqa: E402
 from ._io import load, load_checkpoint, save, save_checkpoint  # noqa: E402
 from ._jointed import JointedModel, JointedState  # noqa: E402
@@ -37,6 +42,21 @@ __all__ = [
     "cantilever",
     "column",
     "compress",
+    "implicit_root",
+    "fit",
+    "fit_problem",
+    "FitResult",
+    "FitModel",
+    "ColumnModel",
+    "UnitMeshModel",
+    "OutcropModel",
+    "FIT_MODELS",
+    "make_fit_model",
+    "Parameter",
+    "NUISANCE_PARAMETERS",
+    "ForceCurve",
+    "load_curve",
+    "save_curve",
     "unit_dendritic_mesh",
     "dendritic_outcrop",
     "probe_network",

@@ -34,7 +34,7 @@ from ._quadrature import get_quadrature
 from ._residual import SOCBModel, routed_nodal_force
 from ._result import PHASES, CompressionResult, LimitPoint
 from ._solve import ConvergenceError
-from ._sparsity import prepare_structured
+from ._sparsity import prepare_structured, structure_key
 
 __all__ = ["compress", "probe_network", "strand_perturbation"]
 
@@ -66,7 +66,7 @@ def probe_network(network: Network) -> Network:
     return eqx.tree_at(
         lambda n: (n.position_projector, n.probe, n.probe_direction),
         network,
-        (jnp.asarray(projector), jnp.asarray(probe), jnp.asarray(direction)),
+        (projector, probe, direction),  # numpy: structure stays concrete under jax.jit
     )
 
 
@@ -75,31 +75,70 @@ def _strands(network: Network) -> list[np.ndarray]:
     return [np.flatnonzero(strand == k) for k in np.unique(strand)]
 
 
+def _perturbation_plan(network: Network, seed: int = 0, positions=None, reference: bool = True) -> dict:
+    """Choices of :func:`strand_perturbation`: per strand k the loaded node, its first and
+    last node, the random angle (from ``seed`` and the strand count only) and, if
+    ``reference``, from concrete ``positions`` (default the network's) a reference lateral direction in 3D that fixes the
+    sign and the direction of strands parallel to the probe axis."""
+    rng = np.random.default_rng(seed)
+    seg, strands = np.asarray(network.segments), _strands(network)
+    plan = {key: [] for key in ("node", "first", "last", "angle")}
+    for k, segs in enumerate(strands):
+        segs = np.sort(segs)
+        angle = (0.0 if k % 2 == 0 else np.pi) if network.dim == 2 else (0.0 if len(strands) == 1 else rng.uniform(0, 2 * np.pi))
+        for key, value in zip(plan, (seg[segs[(len(segs) - 1) // 2], 1], seg[segs[0], 0], seg[segs[-1], 1], angle)):
+            plan[key].append(value)
+    plan = {key: np.asarray(value) for key, value in plan.items()}
+    plan["reference"] = np.zeros((len(strands), network.dim))
+    if not reference:
+        return plan  # the caller supplies the reference (from concrete positions)
+    pos, axis = np.asarray(network.positions if positions is None else positions), np.asarray(network.probe_direction)
+    for k in range(len(strands) if network.dim == 3 else 0):
+        t = pos[plan["last"][k]] - pos[plan["first"][k]]
+        t = t / np.linalg.norm(t)
+        basis = np.linalg.svd(np.eye(3) - np.outer(t, t))[0][:, :2]
+        along = basis.T @ axis
+        reference = basis @ (np.array([-along[1], along[0]]) if np.linalg.norm(along) > 1e-6 else np.array([1.0, 0.0]))
+        plan["reference"][k] = reference / np.linalg.norm(reference)
+    return plan
+
+
+def perturbation_pattern(positions, plan: dict, axis, n_nodes: int):
+    """Unit lateral loads [N, d] of :func:`strand_perturbation` as a differentiable function
+    of the node ``positions`` [N, d] (jax): perpendicular to each strand's chord; in 3D
+    cos(angle) e₁ + sin(angle) t × e₁ with e₁ ∥ t × axis (sign and degenerate case from the
+    plan's reference direction)."""
+    t = positions[plan["last"]] - positions[plan["first"]]
+    t = t / jnp.linalg.norm(t, axis=-1, keepdims=True)
+    if positions.shape[-1] == 2:
+        lateral = jnp.stack([-t[:, 1], t[:, 0]], -1) * jnp.cos(jnp.asarray(plan["angle"]))[:, None]
+    else:
+        reference = jnp.asarray(plan["reference"])
+        c = jnp.cross(t, jnp.asarray(axis)[None, :])
+        norm = jnp.linalg.norm(c, axis=-1, keepdims=True)
+        sign = jax.lax.stop_gradient(jnp.sign(jnp.sum(c * reference, -1, keepdims=True)))
+        e1 = jnp.where(norm > 1e-6, sign * c / jnp.where(norm > 1e-6, norm, 1.0), reference)
+        angle = jnp.asarray(plan["angle"])[:, None]
+        lateral = jnp.cos(angle) * e1 + jnp.sin(angle) * jnp.cross(t, e1)
+        lateral = lateral / jnp.linalg.norm(lateral, axis=-1, keepdims=True)
+    return jnp.zeros((n_nodes, positions.shape[-1]), lateral.dtype).at[plan["node"]].add(lateral)
+
+
 def strand_perturbation(network: Network, magnitude: float, *, seed: int = 0) -> np.ndarray:
     """Loads [N, d] (pN): a lateral force of ``magnitude`` on the middle node of every strand
     (the end node of its middle segment), perpendicular to the strand and to the probe
     direction where possible; random direction from ``seed`` in 3D, alternating sign in 2D
     (single strands: always the first perpendicular, positive)."""
-    rng = np.random.default_rng(seed)
-    pos, seg = np.asarray(network.positions), np.asarray(network.segments)
-    d, loads = network.dim, np.zeros((network.n_nodes, network.dim))
-    axis = np.asarray(network.probe_direction)
-    for k, segs in enumerate(_strands(network)):
-        segs = segs[np.argsort(segs)]
-        node = seg[segs[(len(segs) - 1) // 2], 1]
-        t = pos[seg[segs[-1], 1]] - pos[seg[segs[0], 0]]
-        t = t / np.linalg.norm(t)
-        if d == 2:
-            lateral = np.array([-t[1], t[0]]) * (1.0 if k % 2 == 0 else -1.0)
-        else:
-            basis = np.linalg.svd(np.eye(3) - np.outer(t, t))[0][:, :2]
-            along = basis.T @ axis
-            first = basis @ (np.array([-along[1], along[0]]) if np.linalg.norm(along) > 1e-6 else np.array([1.0, 0.0]))
-            angle = 0.0 if len(_strands(network)) == 1 else rng.uniform(0, 2 * np.pi)
-            second = np.cross(t, first)
-            lateral = np.cos(angle) * first + np.sin(angle) * second
-        loads[node] += magnitude * lateral / np.linalg.norm(lateral)
-    return loads
+    plan = _perturbation_plan(network, seed)
+    pattern = perturbation_pattern(jnp.asarray(network.positions), plan, network.probe_direction, network.n_nodes)
+    return float(magnitude) * np.asarray(pattern)
+
+
+def default_perturbation(EI, lengths, strands) -> jax.Array:
+    """The default lateral force (pN): 1e-4 EI/L² per strand (mean EI, L the longest
+    strand's contour length); differentiable in ``EI`` [S] and ``lengths`` [S]."""
+    L = jnp.max(jnp.stack([jnp.sum(jnp.asarray(lengths)[s]) for s in strands]))
+    return 1e-4 * jnp.mean(jnp.asarray(EI)) / L**2
 
 
 def _gap(network: Network) -> float:
@@ -142,10 +181,8 @@ def _loads(network: Network, perturbation) -> np.ndarray:
         return loads + strand_perturbation(network, magnitude)
     if np.any(loads != 0):
         return loads
-    # Default: a lateral force 1e-4 EI/L² per strand (L: the longest strand's length).
-    lengths = np.asarray(network.lengths)
-    L = max(lengths[s].sum() for s in _strands(network))
-    return strand_perturbation(network, 1e-4 * float(np.mean(np.asarray(network.EI))) / L**2)
+    magnitude = default_perturbation(network.EI, network.lengths, _strands(network))
+    return strand_perturbation(network, float(magnitude))
 
 
 class _Problem(eqx.Module):
@@ -307,6 +344,7 @@ def compress(
     resume: bool = False,
     throw: bool = True,
     parameters: dict | None = None,
+    at=None,
 ) -> CompressionResult:
     """Compress ``network`` with its probe by ``displacement`` µm (and withdraw it if ``unload``).
 
@@ -335,9 +373,45 @@ def compress(
     throw : raise :class:`ConvergenceError` when the protocol does not complete (the partial
         result is ``error.result``); with ``throw=False`` check ``result.completed``.
     parameters : extra JSON-able metadata stored in the result (e.g. builder arguments).
+    at : probe displacements (µm, [M]) at which to return the equilibria instead of the
+        adaptive path steps: the path is still followed adaptively (host side), then each
+        requested point is solved exactly, warm-started from the path.  These points are
+        differentiable (implicit function theorem, never unrolled Newton) with respect to
+        ``at`` and to the network's ``EI``, ``lengths``, ``positions``, ``tangents``,
+        ``loads`` and ``perturbation``.  Under ``jax.grad`` / ``jax.jacfwd`` / ``jax.vmap``
+        / ``jax.jit`` (traced inputs) ``at`` defaults to 64 equal steps up to
+        ``displacement``.  See :func:`socbjax._sampled.compress_at` for the details.
     """
     if not isinstance(network, Network):
         raise TypeError(f"network must be a socbjax Network (e.g. socbjax.column(...)), got {type(network).__name__}")
+    options = dict(unload=unload, method=method, perturbation=perturbation, settings=settings,
+                   linear_solver=linear_solver, quadrature_order=quadrature_order, progress=progress)
+    if at is not None or _traced(network, perturbation):
+        from ._sampled import compress_at
+
+        return compress_at(network, displacement, at, throw=throw, parameters=parameters, **options)
+    protocol, status, network, options = run_protocol(
+        network, displacement, **options, checkpoint=checkpoint, checkpoint_every=checkpoint_every, resume=resume
+    )
+    result = _package(protocol.model, protocol.loads, _concat(protocol.parts), protocol.extra, status, network, parameters, options)
+    if throw and not result.completed:
+        err = ConvergenceError(
+            f"compress stopped: {result.status_message} (reached u = {result.displacement[-1]:.4g} µm, "
+            f"{result.n_steps} steps). Try method='arclength', smaller PathSettings steps, or throw=False."
+        )
+        err.result = result
+        raise err
+    return result
+
+
+def _traced(*trees) -> bool:
+    return any(isinstance(leaf, jax.core.Tracer) for leaf in jax.tree_util.tree_leaves(trees))
+
+
+def run_protocol(network, displacement, *, unload, method, perturbation, settings, linear_solver, quadrature_order,
+                 progress=False, checkpoint=None, checkpoint_every=50, resume=False):
+    """Validate the inputs and run the settle/loading/unloading phases on the host (concrete
+    arrays only).  Returns (protocol with its records, status, probed network, options)."""
     network = probe_network(network)
     settings = PathSettings() if settings is None else settings
     if method != settings.method:
@@ -354,15 +428,7 @@ def compress(
         protocol.resume()
     status = protocol.run()
     options = dict(settings=settings, u_max=u_max, unload=unload, quadrature_order=quadrature_order)
-    result = _package(protocol.model, protocol.loads, _concat(protocol.parts), protocol.extra, status, network, parameters, options)
-    if throw and not result.completed:
-        err = ConvergenceError(
-            f"compress stopped: {result.status_message} (reached u = {result.displacement[-1]:.4g} µm, "
-            f"{result.n_steps} steps). Try method='arclength', smaller PathSettings steps, or throw=False."
-        )
-        err.result = result
-        raise err
-    return result
+    return protocol, status, network, options
 
 
 def _path_geometry(model) -> jax.Array:
@@ -401,7 +467,8 @@ class _Protocol:
             return backend.prepare(lambda y: F_settle(y, 0.5), self.x0)
         # The pattern must cover both the settle and the loading residuals (probe rows differ).
         F_load = self._problem(0.0, 0.1).make_F(self.unravel)(self.x0)
-        return prepare_structured([lambda y: F_settle(y, 0.5), lambda y: F_load(y, 0.5)], self.x0, self.model.structure())
+        return prepare_structured([lambda y: F_settle(y, 0.5), lambda y: F_load(y, 0.5)], self.x0, self.model.structure(),
+                                  cache_key=structure_key(self.network, "protocol"))
 
     def _problem(self, u_from, u_to):
         return _Problem(self.model, self.loads, jnp.array([1.0, u_from]), jnp.array([1.0, u_to]))

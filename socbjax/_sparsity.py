@@ -43,7 +43,26 @@ def _solver(rows, cols, n, permc_spec) -> SparseJacobianSolver:
     return SparseJacobianSolver.from_pattern(rows, cols, n, permc_spec=permc_spec)
 
 
-def prepare_structured(fns, x_example, structure, *, permc_spec: str = "COLAMD") -> SparseJacobianSolver:
+_PREPARED: dict = {}
+
+
+def structure_key(network, *extra) -> str:
+    """A fingerprint of everything in ``network`` that fixes its Jacobian pattern: the
+    topology, supports, probe and the shapes (not the values) of the differentiable arrays."""
+    import hashlib
+
+    h = hashlib.sha256(repr((network.dim, extra)).encode())
+    for name, value in sorted(vars(network).items()):
+        if name in ("positions", "tangents", "lengths", "EI", "loads"):
+            h.update(repr((name, np.shape(value))).encode())
+        elif hasattr(value, "shape"):
+            a = np.asarray(value)
+            h.update(repr((name, a.shape, a.dtype.str)).encode())
+            h.update(np.ascontiguousarray(a != 0 if a.dtype.kind == "f" else a).tobytes())
+    return h.hexdigest()
+
+
+def prepare_structured(fns, x_example, structure, *, permc_spec: str = "COLAMD", cache_key: str | None = None) -> SparseJacobianSolver:
     """A prepared :class:`SparseJacobianSolver` whose pattern covers ∂f/∂x of every f in
     ``fns`` (e.g. the settle and the loading residuals, which differ in their probe rows):
     the graph pattern of ``structure``, coloured, gives each Jacobian at two random points
@@ -52,7 +71,12 @@ def prepare_structured(fns, x_example, structure, *, permc_spec: str = "COLAMD")
 
     COLAMD is the default ordering: on SOCB network Jacobians at straight reference states
     the symmetric minimum-degree ordering (``MMD_AT_PLUS_A``) produced factorisations ~100×
-    slower (measured 3.7 s vs 11 ms for the 8-generation outcrop, n = 6891)."""
+    slower (measured 3.7 s vs 11 ms for the 8-generation outcrop, n = 6891).
+
+    ``cache_key`` (e.g. from :func:`structure_key`): reuse the solver prepared for the same
+    key (fits and finite differences rebuild the same network structure many times)."""
+    if cache_key is not None and (cache_key, permc_spec) in _PREPARED:
+        return _PREPARED[cache_key, permc_spec]
     fns = list(fns) if isinstance(fns, (list, tuple)) else [fns]
     n = int(np.size(x_example))
     rows, cols = structural_pattern(structure)
@@ -73,4 +97,6 @@ def prepare_structured(fns, x_example, structure, *, permc_spec: str = "COLAMD")
         np.add.at(approx, solver.rows.a, vals * v[solver.cols.a])
         if not np.allclose(approx, exact, rtol=1e-8, atol=1e-8 * max(1.0, float(np.abs(exact).max()))):
             raise RuntimeError("the graph sparsity pattern misses dependencies of the residual; use linear_solver='dense'")
+    if cache_key is not None:
+        _PREPARED[cache_key, permc_spec] = solver
     return solver

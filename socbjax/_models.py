@@ -1,0 +1,209 @@
+"""Models for fitting: a network whose physical parameters are traced jax values.
+
+A :class:`FitModel` declares its parameters (:class:`socbjax.Parameter`: name, unit,
+bounds, default) and builds its :class:`Network` from a dict of values with jax operations
+only, so :func:`socbjax.compress` — and therefore a fit loss — is differentiable in them.
+The topology (nodes, segments, junctions, supports) is fixed when the model is made, at the
+default values; parameters change stiffness, geometry and loads, never the structure.
+
+Built-in models (``socbjax.fit(model="...")`` and the command line):
+
+* ``"column"`` (:class:`ColumnModel`): a single filament compressed end to end (paper
+  Fig. 5d); parameter ``EI``.
+* ``"unit-mesh"`` (:class:`UnitMeshModel`): the unit dendritic mesh (Fig. 6a); ``EI``,
+  ``EI_mother``, ``EI_daughter``, ``branch_angle``, ``perturbation``.  The branch angle
+  rebuilds the geometry: the daughter leaves the mother's middle at the angle and grows
+  straight to the surface, where it is hinged, so its length (L/2)/cos(angle) and its
+  hinge point move with the angle (no pre-stress at any angle).
+* ``"outcrop"`` (:class:`OutcropModel`): a dendritic outcrop (Fig. 7a) for one seed;
+  ``EI``, ``EI_gen0``, ``EI_gen1``, … (per branching order: the first mother is order 0,
+  her daughters 1, …) and ``perturbation``.  Its branch angle is not a fit parameter: the
+  random growth (which strands reach the surface, how they are cut) changes discretely with
+  the angle; fit the angle on the unit mesh, or build outcrops at several angles.
+
+Stiffness groups: a segment takes the value of its group's parameter (``EI_mother``,
+``EI_gen2``, …) when that parameter is free or fixed in the fit, else the global ``EI``.
+``perturbation`` (pN) is the lateral force per strand; left out, :func:`socbjax.compress`
+uses 1e-4 EI/L², which scales with EI so that forces scale exactly with EI.
+"""
+
+from __future__ import annotations
+
+import equinox as eqx
+import jax.numpy as jnp
+import numpy as np
+
+from ._builders import column
+from ._compress import _gap, _strands, probe_network
+from ._dendritic import dendritic_outcrop, unit_dendritic_mesh
+from ._network import Network
+from ._parameters import Parameter
+
+__all__ = ["FitModel", "ColumnModel", "UnitMeshModel", "OutcropModel", "make_fit_model", "FIT_MODELS"]
+
+_ACTIN_EI = 0.071
+
+
+def _ei(name: str, doc: str) -> Parameter:
+    return Parameter(name, _ACTIN_EI, "pN·µm²", lower=0.0, doc=doc)
+
+
+_PERTURBATION = Parameter("perturbation", 1e-5, "pN", lower=0.0, doc="lateral force on the middle of every strand")
+
+
+class FitModel:
+    """Base class: ``parameters`` (name -> Parameter), ``groups`` (name -> segment mask [S]),
+    ``base`` (the network at the defaults) and :meth:`network` (values -> Network, traced)."""
+
+    name = "model"
+    base: Network
+    parameters: dict[str, Parameter]
+    groups: dict[str, np.ndarray]
+
+    @property
+    def gap(self) -> float:
+        """Largest probe travel the model can reach (µm): the probe–surface distance."""
+        return _gap(self.base)
+
+    def describe(self) -> str:
+        lines = [f"{self.name}: {self.base.n_nodes} nodes, {self.base.n_segments} segments, {self.base.n_junctions} junctions"]
+        for p in self.parameters.values():
+            lines.append(f"  {p.name:<14s} default {p.value:<10.4g} {p.unit:<8s} bounds ({p.lower}, {p.upper})  {p.doc}")
+        return "\n".join(lines)
+
+    def stiffness(self, values: dict) -> jnp.ndarray:
+        """EI per segment [S] (pN·µm²) from the global and group values."""
+        EI = jnp.full((self.base.n_segments,), 1.0) * values.get("EI", self.parameters["EI"].value)
+        for name, mask in self.groups.items():
+            if name in values:
+                EI = jnp.where(jnp.asarray(mask), values[name], EI)
+        return EI
+
+    def geometry(self, values: dict) -> tuple:
+        """(positions [N, d], tangents [N, d], lengths [S]); default: the base geometry."""
+        return self.base.positions, self.base.tangents, self.base.lengths
+
+    def network(self, values: dict) -> Network:
+        """The network at ``values`` (name -> float or traced scalar; missing: defaults)."""
+        unknown = set(values) - set(self.parameters)
+        if unknown:
+            raise ValueError(f"{self.name} has no parameter(s) {sorted(unknown)}; it has {sorted(self.parameters)}")
+        positions, tangents, lengths = self.geometry(values)
+        return eqx.tree_at(
+            lambda n: (n.positions, n.tangents, n.lengths, n.EI),
+            self.base,
+            (positions, tangents, lengths, self.stiffness(values)),
+        )
+
+
+class ColumnModel(FitModel):
+    """A single filament of ``n_nodes`` (µm ``length``) with ``supports``, compressed by its
+    last node toward the first (:func:`socbjax.column`)."""
+
+    name = "column"
+
+    def __init__(self, n_nodes: int = 5, *, length: float = 1.0, supports=("clamped", "pinned"), dim: int = 2):
+        self.base = probe_network(column(n_nodes, length=length, EI=_ACTIN_EI, supports=supports, dim=dim))
+        self.parameters = {"EI": _ei("EI", "bending stiffness"), "perturbation": _PERTURBATION}
+        self.groups = {}
+
+
+class UnitMeshModel(FitModel):
+    """The unit dendritic mesh (:func:`socbjax.unit_dendritic_mesh`) with a differentiable
+    branch angle; ``branch_angle`` (deg) here is only the default / topology angle."""
+
+    name = "unit-mesh"
+
+    def __init__(self, *, branch_angle: float = 70.0, mother_length: float = 1.0, segment_length: float = 0.25, dim: int = 2):
+        self.base = unit_dendritic_mesh(
+            EI=_ACTIN_EI, branch_angle=branch_angle, mother_length=mother_length, segment_length=segment_length, dim=dim
+        )
+        self.mother_length = float(mother_length)
+        strand = np.asarray(self.base.strand)
+        self.groups = {"EI_mother": strand == 0, "EI_daughter": strand == 1}
+        seg = np.asarray(self.base.segments)
+        self._daughter_nodes = seg[strand == 1, 1]  # in growth order
+        self._daughter_base = int(seg[strand == 1, 0][0])
+        self._middle = int(np.asarray(self.base.attach)[self._daughter_base])
+        lengths = np.asarray(self.base.lengths)[strand == 1]
+        self._fractions = np.cumsum(lengths) / lengths.sum()
+        self._daughter_segments = np.flatnonzero(strand == 1)
+        self.parameters = {
+            "EI": _ei("EI", "bending stiffness of all filaments"),
+            "EI_mother": _ei("EI_mother", "bending stiffness of the mother"),
+            "EI_daughter": _ei("EI_daughter", "bending stiffness of the daughter"),
+            "branch_angle": Parameter(
+                "branch_angle", float(branch_angle), "deg", lower=0.0, upper=90.0,
+                doc="daughter–mother angle at the junction (the daughter grows straight to the surface)",
+            ),
+            "perturbation": _PERTURBATION,
+        }
+
+    def geometry(self, values: dict) -> tuple:
+        if "branch_angle" not in values:
+            return super().geometry(values)
+        phi = jnp.deg2rad(values["branch_angle"])
+        d = self.base.dim
+        t_d = jnp.cos(phi) * jnp.eye(d)[-1] + jnp.sin(phi) * jnp.eye(d)[0]
+        total = 0.5 * self.mother_length / jnp.cos(phi)
+        origin = jnp.asarray(self.base.positions)[self._middle]
+        nodes = np.concatenate([[self._daughter_base], self._daughter_nodes])
+        s = jnp.concatenate([jnp.zeros(1), total * jnp.asarray(self._fractions)])
+        positions = jnp.asarray(self.base.positions).at[nodes].set(origin[None, :] + s[:, None] * t_d[None, :])
+        tangents = jnp.asarray(self.base.tangents).at[nodes].set(jnp.broadcast_to(t_d, (nodes.size, d)))
+        pieces = jnp.diff(s)
+        lengths = jnp.asarray(self.base.lengths).at[self._daughter_segments].set(pieces)
+        return positions, tangents, lengths
+
+
+def _branch_orders(network: Network) -> np.ndarray:
+    """Branching order of every strand [n_strands]: 0 for strands that start at no junction,
+    1 + the mother strand's order for a daughter."""
+    strand, seg = np.asarray(network.strand), np.asarray(network.segments)
+    attach = np.asarray(network.attach)
+    mother_of = {}
+    for s in range(strand.max() + 1):
+        start = seg[strand == s, 0].min(initial=seg.shape[0] * 2)
+        first = seg[strand == s][0, 0] if np.any(strand == s) else start
+        if attach[first] != first:
+            J = attach[first]
+            mother_of[s] = int(strand[np.flatnonzero((seg[:, 0] == J) | (seg[:, 1] == J))[0]])
+    order = np.zeros(strand.max() + 1, int)
+    for s in range(order.size):
+        k, depth = s, 0
+        while k in mother_of:
+            k, depth = mother_of[k], depth + 1
+        order[s] = depth
+    return order
+
+
+class OutcropModel(FitModel):
+    """A dendritic outcrop (:func:`socbjax.dendritic_outcrop`, arguments passed on) with EI
+    per branching order."""
+
+    name = "outcrop"
+
+    def __init__(self, **builder):
+        builder = {"generations": 4, "gap": 3.0, "dim": 3, "perturbation": 0.0, **builder}
+        builder.pop("EI", None)
+        self.base = dendritic_outcrop(EI=_ACTIN_EI, **builder)
+        order = _branch_orders(self.base)[np.asarray(self.base.strand)]
+        self.groups = {f"EI_gen{k}": order == k for k in range(order.max() + 1)}
+        self.parameters = {"EI": _ei("EI", "bending stiffness of all filaments")}
+        self.parameters.update({k: _ei(k, f"bending stiffness of branching order {k[6:]}") for k in self.groups})
+        self.parameters["perturbation"] = _PERTURBATION
+        self.n_strands = len(_strands(self.base))
+
+
+FIT_MODELS = {"column": ColumnModel, "unit-mesh": UnitMeshModel, "outcrop": OutcropModel}
+
+
+def make_fit_model(model, **options) -> FitModel:
+    """A :class:`FitModel` from a name in ``FIT_MODELS`` (with builder ``options``) or itself."""
+    if isinstance(model, FitModel):
+        if options:
+            raise ValueError("model options apply to built-in model names only")
+        return model
+    if model not in FIT_MODELS:
+        raise ValueError(f"unknown model {model!r}; use one of {sorted(FIT_MODELS)} or a socbjax.FitModel")
+    return FIT_MODELS[model](**options)

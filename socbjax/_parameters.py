@@ -1,0 +1,99 @@
+"""Fit parameters: names, units, bounds and the transforms that enforce the bounds.
+
+A :class:`Parameter` is a physical value with optional bounds.  The optimiser works on an
+unconstrained number z; the value is
+
+* lower and upper bound: ``lower + (upper − lower) · sigmoid(z)`` (e.g. a branch angle in
+  (0°, 90°)),
+* lower bound only: ``lower + exp(z)`` (e.g. EI > 0, a force scale > 0),
+* no bounds: ``z`` itself (e.g. a contact-point offset or a force baseline),
+
+so every value an optimiser can reach is admissible and no step is ever clipped.  Standard
+errors are mapped from z to the value with the transform's derivative (delta method).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+__all__ = ["Parameter", "NUISANCE_PARAMETERS"]
+
+
+@dataclasses.dataclass(frozen=True)
+class Parameter:
+    """One model or data parameter.
+
+    name : identifier used by ``fit(free=..., fixed=...)`` and the command line.
+    value : default / initial value (in ``unit``).
+    unit : e.g. "pN·µm²", "deg", "µm", "pN", "1".
+    lower, upper : open bounds (None: unbounded on that side).
+    doc : one line: what it is.
+    """
+
+    name: str
+    value: float
+    unit: str
+    lower: float | None = None
+    upper: float | None = None
+    doc: str = ""
+
+    def __post_init__(self):
+        lo, hi = self.lower, self.upper
+        if lo is not None and hi is not None and not lo < hi:
+            raise ValueError(f"parameter {self.name}: lower bound {lo} must be below upper bound {hi}")
+
+    def check(self, value: float, what: str = "value") -> float:
+        """``value`` as a float strictly inside the bounds, else ValueError naming them."""
+        v = float(value)
+        if not math.isfinite(v):
+            raise ValueError(f"{self.name} {what} must be finite, got {value!r}")
+        if (self.lower is not None and v <= self.lower) or (self.upper is not None and v >= self.upper):
+            raise ValueError(
+                f"{self.name} {what} {v:g} {self.unit} is outside its bounds ({self.lower}, {self.upper}); "
+                "choose a value strictly inside or change the bounds"
+            )
+        return v
+
+    def with_bounds(self, lower, upper) -> Parameter:
+        return dataclasses.replace(self, lower=lower, upper=upper)
+
+    def to_value(self, z):
+        """Unconstrained z (jax or float) -> value."""
+        lo, hi = self.lower, self.upper
+        if lo is not None and hi is not None:
+            return lo + (hi - lo) * jax.nn.sigmoid(z)
+        if lo is not None:
+            return lo + jnp.exp(z)
+        if hi is not None:
+            return hi - jnp.exp(-z)
+        return z
+
+    def to_z(self, value: float) -> float:
+        """Value -> unconstrained z (host side)."""
+        v, lo, hi = self.check(value), self.lower, self.upper
+        if lo is not None and hi is not None:
+            q = (v - lo) / (hi - lo)
+            return float(np.log(q) - np.log1p(-q))
+        if lo is not None:
+            return float(np.log(v - lo))
+        if hi is not None:
+            return float(-np.log(hi - v))
+        return v
+
+
+NUISANCE_PARAMETERS = {
+    p.name: p
+    for p in (
+        Parameter("contact_offset", 0.0, "µm", doc="added to the data's compression: shifts the contact point"),
+        Parameter("baseline", 0.0, "pN", doc="force offset added to the model force"),
+        Parameter(
+            "force_scale", 1.0, "1", lower=0.0,
+            doc="multiplies the model force (e.g. the number of outcrops under the probe)",
+        ),
+    )
+}

@@ -1,0 +1,137 @@
+"""fit: parameter recovery from synthetic curves with noise, uncertainties that cover the
+truth, identifiability, the optax optimisers, and clear errors for bad input."""
+
+import json
+
+import numpy as np
+import pytest
+
+import socbjax as sj
+from socbjax._models import ColumnModel, UnitMeshModel
+
+TRUTH = {"EI": 0.071, "branch_angle": 70.0}
+
+
+def _synthetic(model, values, compression, seed, noise=0.02, displacement=None, **extra):
+    network = model.network({k: v for k, v in values.items() if k in model.parameters})
+    u = compression + extra.get("contact_offset", 0.0)
+    clean = np.asarray(sj.compress(network, displacement or float(u.max()), at=np.maximum(u, 1e-6),
+                                   perturbation=values.get("perturbation")).force)
+    clean = np.where(u > 0, clean, 0.0) + extra.get("baseline", 0.0)
+    rng = np.random.default_rng(seed)
+    return clean + noise * np.abs(clean) * rng.standard_normal(clean.size)
+
+
+@pytest.fixture(scope="module")
+def unit_mesh():
+    return UnitMeshModel(dim=2)
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("seed", [0, 1])
+def test_recovers_EI_and_branch_angle_from_noisy_curves(unit_mesh, seed):
+    """2 % noise; start 50 % off in EI and 15° off in angle; EI within 2 %, angle within 1°,
+    and the Gauss–Newton standard errors cover the truth (within 3 σ)."""
+    c = np.linspace(0.005, 0.5, 40)
+    F = _synthetic(unit_mesh, TRUTH, c, seed)
+    result = sj.fit((c, F), unit_mesh, free=("EI", "branch_angle"), initial={"EI": 1.5 * 0.071, "branch_angle": 55.0})
+    assert result.converged and result.identifiable, result.summary()
+    assert result.values["EI"] == pytest.approx(0.071, rel=0.02)
+    assert result.values["branch_angle"] == pytest.approx(70.0, abs=1.0)
+    for name in ("EI", "branch_angle"):
+        assert abs(result.values[name] - TRUTH[name]) <= 3 * result.standard_errors[name], result.summary()
+    assert result.rms == pytest.approx(np.sqrt(np.mean((0.02 * F) ** 2)), rel=0.35)  # residuals ≈ the noise
+    assert result.history[0]["loss"] > result.loss
+
+
+def test_recovers_contact_offset_and_baseline_on_a_column():
+    """An imperfect column (lateral force 0.2 pN, 14 % of its Euler load) stiffens smoothly
+    from contact, so the contact point is determined by the data."""
+    model = ColumnModel(5, supports=("clamped", "pinned"))
+    c = np.linspace(-0.1, 0.4, 30)
+    extra = {"contact_offset": 0.03, "baseline": 0.05}
+    F = _synthetic(model, {"EI": 0.071, "perturbation": 0.2}, c, seed=4, noise=0.005, displacement=0.45, **extra)
+    result = sj.fit((c, F), model, free=("EI", "contact_offset", "baseline"), initial={"EI": 0.05},
+                    fixed={"perturbation": 0.2})
+    assert result.converged, result.summary()
+    assert result.values["EI"] == pytest.approx(0.071, rel=0.02)
+    assert result.values["contact_offset"] == pytest.approx(0.03, abs=3e-3)
+    assert result.values["baseline"] == pytest.approx(0.05, abs=0.02)
+    assert result.correlation.shape == (3, 3) and np.allclose(np.diag(result.correlation), 1.0)
+
+
+@pytest.mark.parametrize("optimizer", ["adam", "lbfgs"])
+def test_optax_optimisers_reach_the_least_squares_EI(optimizer):
+    """One parameter: the least-squares EI of a noisy curve is known in closed form because the
+    force is exactly proportional to EI: EI* = EI₀ Σ F f / Σ f² (f the model at EI₀)."""
+    model = ColumnModel(4, supports=("pinned", "pinned"))
+    c = np.linspace(0.02, 0.3, 12)
+    F = _synthetic(model, {"EI": 0.071}, c, seed=2)
+    f0 = np.asarray(sj.compress(model.network({"EI": 0.071}), 0.3, at=c).force)
+    best = 0.071 * float(F @ f0) / float(f0 @ f0)
+    kwargs = {"learning_rate": 0.1, "max_iterations": 150} if optimizer == "adam" else {"max_iterations": 30}
+    result = sj.fit((c, F), model, free="EI", initial={"EI": 0.05}, optimizer=optimizer, tolerance=1e-12, **kwargs)
+    assert result.values["EI"] == pytest.approx(best, rel=2e-3)
+    lm = sj.fit((c, F), model, free="EI", initial={"EI": 0.05})
+    assert lm.values["EI"] == pytest.approx(best, rel=1e-6)
+
+
+def test_EI_and_force_scale_are_refused_together():
+    c, F = np.linspace(0.01, 0.2, 5), np.ones(5)
+    with pytest.raises(ValueError, match="not separately identifiable"):
+        sj.fit((c, F), "column", free=("EI", "force_scale"))
+    model = UnitMeshModel(dim=2)
+    with pytest.raises(ValueError, match="not separately identifiable"):
+        sj.fit((c, F), model, free=("EI_mother", "EI_daughter", "force_scale"), fixed={})
+    # one group free and the other fixed is not degenerate: accepted up to the data check
+    problem = sj.fit_problem((c, F), model, free=("EI_mother", "force_scale"), fixed={"EI_daughter": 0.07})
+    assert problem["free"] == ("EI_mother", "force_scale")
+
+
+def test_correlated_parameters_are_reported_not_identifiable():
+    """Contact offset and EI on a flat post-buckling plateau: shifting the contact point and
+    changing EI are nearly the same change of the curve → flagged, with a warning."""
+    model = ColumnModel(4, supports=("pinned", "pinned"))
+    c = np.linspace(0.25, 0.3, 8)  # a short piece of the plateau only
+    F = _synthetic(model, {"EI": 0.071}, c, seed=5, noise=0.0, displacement=0.35)
+    result = sj.fit((c, F), model, free=("EI", "baseline"), initial={"EI": 0.06}, max_iterations=10)
+    assert not result.identifiable and any("correlated" in w for w in result.warnings)
+
+
+def test_fit_result_json_round_trip(tmp_path):
+    model = ColumnModel(3, supports=("pinned", "pinned"))
+    c = np.linspace(0.02, 0.2, 6)
+    F = _synthetic(model, {"EI": 0.071}, c, seed=0)
+    result = sj.fit((c, F), model, free="EI", initial={"EI": 0.06})
+    path = tmp_path / "fit.json"
+    result.save(path)
+    data = json.loads(path.read_text())
+    assert data["values"]["EI"] == pytest.approx(result.values["EI"])
+    assert data["units"]["EI"] == "pN·µm²" and len(data["residuals"]) == c.size
+    assert [p.name for p in tmp_path.iterdir()] == ["fit.json"]  # no temporary left behind
+
+
+def test_bad_input_is_refused_with_clear_messages():
+    c, F = np.linspace(0.01, 0.2, 6), np.linspace(1, 2, 6)
+    with pytest.raises(ValueError, match="unknown parameter 'stiffness'"):
+        sj.fit((c, F), "column", free=("stiffness",))
+    with pytest.raises(ValueError, match="both free and fixed"):
+        sj.fit((c, F), "column", free=("EI",), fixed={"EI": 0.1})
+    with pytest.raises(ValueError, match="NaN"):
+        sj.fit((c, np.where(c > 0.1, np.nan, F)), "column")
+    with pytest.raises(ValueError, match="at least 3"):
+        sj.fit((c[:2], F[:2]), "column")
+    with pytest.raises(ValueError, match="non-decreasing"):
+        sj.fit((c[::-1], F), "column")
+    with pytest.raises(ValueError, match="never passes the contact"):
+        sj.fit((-c[::-1], F), "column")
+    with pytest.raises(ValueError, match="crop the curve"):
+        sj.fit((c * 10, F), "column")
+    with pytest.raises(ValueError, match="outside its bounds"):
+        sj.fit((c, F), "unit-mesh", free=("branch_angle",), initial={"branch_angle": 95.0})
+    with pytest.raises(ValueError, match="optimizer"):
+        sj.fit((c, F), "column", optimizer="newton")
+    with pytest.raises(ValueError, match="unknown model"):
+        sj.fit((c, F), "spring")
+    with pytest.raises(ValueError, match="no parameter"):
+        UnitMeshModel(dim=2).network({"EI_gen3": 1.0})

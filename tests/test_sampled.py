@@ -1,0 +1,143 @@
+"""compress(..., at=...): equilibria sampled at prescribed probe displacements, with implicit
+derivatives checked against closed forms, exact EI scaling and central finite differences
+of the whole pipeline (path re-run at every perturbed parameter)."""
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+import socbjax as sj
+from socbjax._models import ColumnModel, OutcropModel, UnitMeshModel
+from test_compress import _pinned_pinned_force
+
+TIGHT = sj.PathSettings(atol=1e-12)
+
+
+def _central(f, x, rel=1e-5):
+    """Central differences of a scalar function f of the vector x, component by component."""
+    x = np.asarray(x, float)
+    out = []
+    for i in range(x.size):
+        h = rel * max(abs(x[i]), 1e-3)
+        e = np.zeros_like(x)
+        e[i] = h
+        out.append((float(f(jnp.asarray(x + e))) - float(f(jnp.asarray(x - e)))) / (2 * h))
+    return np.asarray(out)
+
+
+def test_sampled_column_follows_the_closed_form_and_its_slope():
+    """Forces at the samples equal the elliptic-integral elastica; dF/du (implicit, with
+    respect to the sampled displacement) equals the closed form's slope; dF/dEI = F/EI (the
+    default perturbation scales with EI, so the force scales exactly with EI)."""
+    model = ColumnModel(5, supports=("pinned", "pinned"))
+    at = jnp.array([0.05, 0.15, 0.3])
+
+    def force(EI, a):
+        return sj.compress(model.network({"EI": EI}), 0.3, at=a, settings=TIGHT).force
+
+    F = np.asarray(force(0.071, at))
+    np.testing.assert_allclose(F, _pinned_pinned_force(np.asarray(at), EI=0.071), rtol=5e-4)
+    dF_dEI = np.asarray(jax.jacfwd(force, 0)(0.071, at))
+    np.testing.assert_allclose(dF_dEI, F / 0.071, rtol=1e-8)
+    slope = np.diag(np.asarray(jax.jacfwd(force, 1)(0.071, at)))
+    h = 1e-6
+    exact = (_pinned_pinned_force(np.asarray(at) + h, EI=0.071) - _pinned_pinned_force(np.asarray(at) - h, EI=0.071)) / (2 * h)
+    np.testing.assert_allclose(slope, exact, rtol=3e-3)
+
+
+def test_grad_jacfwd_vmap_and_jit_agree():
+    model = ColumnModel(4, supports=("clamped", "free"))
+    at = jnp.array([0.1, 0.2])
+
+    def loss(EI):
+        return jnp.sum(sj.compress(model.network({"EI": EI}), 0.25, at=at).force ** 2)
+
+    g = float(jax.grad(loss)(0.05))
+    assert float(jax.jacfwd(loss)(0.05)) == pytest.approx(g, rel=1e-10)
+    assert float(jax.jit(jax.grad(loss))(0.05)) == pytest.approx(g, rel=1e-10)
+    batched = jax.vmap(jax.grad(loss))(jnp.array([0.05, 0.1]))
+    assert float(batched[0]) == pytest.approx(g, rel=1e-10)
+    assert float(batched[1]) == pytest.approx(2 * g, rel=1e-8)  # loss ∝ EI², so dL/dEI ∝ EI
+
+
+def _unit_mesh_loss(weights, at):
+    model = UnitMeshModel(dim=2)
+    names = ("EI_mother", "EI_daughter", "branch_angle", "perturbation")
+
+    def loss(theta):
+        values = dict(zip(names, theta))
+        network = model.network({k: v for k, v in values.items() if k != "perturbation"})
+        result = sj.compress(network, 0.5, at=at, perturbation=values["perturbation"], settings=TIGHT)
+        return jnp.sum(weights * result.force)
+
+    return loss, np.array([0.071, 0.05, 65.0, 2e-5])
+
+
+def _outcrop_loss(weights, at):
+    model = OutcropModel(generations=3, gap=2.0, dim=2, seed=1)
+    names = tuple(model.groups)
+
+    def loss(theta):
+        network = model.network(dict(zip(names, theta)))
+        return jnp.sum(weights * sj.compress(network, 0.8, at=at, settings=TIGHT, linear_solver="sparse").force)
+
+    return loss, np.linspace(0.05, 0.09, len(names))
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("case", ["unit_mesh", "outcrop"])
+def test_implicit_gradients_match_finite_differences(case):
+    """Gradient of a weighted sum of sampled forces — before buckling, at the drop and far
+    past it — against central differences of the whole pipeline, 1e-6 relative."""
+    rng = np.random.default_rng(3)
+    at = jnp.array([0.01, 0.1, 0.3, 0.5]) if case == "unit_mesh" else jnp.array([0.02, 0.2, 0.5, 0.8])
+    weights = jnp.asarray(rng.uniform(0.5, 1.5, at.size))
+    loss, theta = (_unit_mesh_loss if case == "unit_mesh" else _outcrop_loss)(weights, at)
+    implicit = np.asarray(jax.grad(loss)(jnp.asarray(theta)))
+    fd = _central(loss, theta)
+    scale = np.abs(implicit).max()
+    np.testing.assert_allclose(implicit, fd, rtol=1e-6, atol=1e-6 * scale)
+
+
+def test_column_gradient_matches_finite_differences_past_buckling():
+    """Single filament: EI, perturbation and the sampled displacement, 1e-6 relative."""
+    model = ColumnModel(5, supports=("clamped", "pinned"))
+    weights = jnp.array([0.3, 1.0, 2.0])
+
+    def loss(theta):
+        EI, perturbation, u = theta
+        at = jnp.array([0.02, 0.2, 0.0]) + jnp.array([0.0, 0.0, u])
+        result = sj.compress(model.network({"EI": EI}), 0.5, at=at, perturbation=perturbation, settings=TIGHT)
+        return jnp.sum(weights * result.force)
+
+    theta = np.array([0.071, 1e-5, 0.4])
+    implicit = np.asarray(jax.grad(loss)(jnp.asarray(theta)))
+    np.testing.assert_allclose(implicit, _central(loss, theta), rtol=1e-6, atol=1e-6 * np.abs(implicit).max())
+
+
+def test_unloading_samples_retrace_loading():
+    """The unit mesh's collapse is reversible: unloading samples equal loading ones."""
+    at = jnp.array([0.05, 0.2, 0.4])
+    result = sj.compress(sj.unit_dendritic_mesh(dim=2), 0.45, at=at, unload=True)
+    assert result.force.shape == (6,) and list(result.phase) == [1, 1, 1, 2, 2, 2]
+    np.testing.assert_allclose(result.force[3:][::-1], result.force[:3], rtol=1e-7)
+    assert result.converged.all()
+
+
+def test_sampled_input_errors():
+    net = sj.column(4, supports=("pinned", "pinned"))
+    with pytest.raises(ValueError, match="beyond displacement"):
+        sj.compress(net, 0.2, at=[0.1, 0.3])
+    with pytest.raises(ValueError, match="finite"):
+        sj.compress(net, 0.2, at=[0.1, np.nan])
+    with pytest.raises(TypeError, match="Python float"):
+        jax.grad(lambda u: sj.compress(net, u, at=[0.1]).force[0])(0.2)
+    with pytest.raises(TypeError, match="only positions, tangents"):
+        jax.grad(lambda p: sj.compress(eqx_probe(net, p), 0.2, at=[0.1]).force[0])(1.0)
+
+
+def eqx_probe(net, p):
+    import equinox as eqx
+
+    return eqx.tree_at(lambda n: n.probe_direction, sj.probe_network(net), sj.probe_network(net).probe_direction * p)
