@@ -19,6 +19,7 @@ from ._compress import compress, probe_network, strand_perturbation  # noqa: E40
 from ._dendritic import dendritic_outcrop, unit_dendritic_mesh  # noqa: E402
 from ._continuation import ContinuationResult, ContinuationSettings, load_continuation  # noqa: E402
 from ._fit import FitResult, fit, fit_problem  # noqa: E402
+from ._fit_figure import plot_fit, save_fit_figure  # noqa: E402
 from ._implicit import implicit_root  # noqa: E402
 from ._models import FIT_MODELS, ColumnModel, FitModel, OutcropModel, UnitMeshModel, make_fit_model  # noqa: E402
 from ._parameters import NUISANCE_PARAMETERS, Parameter  # noqa: E402
@@ -46,6 +47,8 @@ __all__ = [
     "fit",
     "fit_problem",
     "FitResult",
+    "plot_fit",
+    "save_fit_figure",
     "FitModel",
     "ColumnModel",
     "UnitMeshModel",

@@ -330,6 +330,22 @@ def _optax(loss_and_grad, loss_fn, z, optimizer, max_iterations, tolerance, lear
 
 
 # ------------------------------------------------------------------------------ fit
+def _check_start(residuals, problem) -> None:
+    """Evaluate the model once at the initial values, untraced, so that a path that cannot be
+    followed over the data's range fails here with the solver's own message."""
+    from ._solve import ConvergenceError
+
+    try:
+        r = np.asarray(residuals(problem["z0"]))
+    except ConvergenceError as err:
+        raise ValueError(
+            f"the model cannot be evaluated over the data's compression range (up to {problem['reach']:.4g} µm) at the "
+            f"initial values: {err} Crop the curve (max_compression), use method='arclength', or start elsewhere"
+        ) from None
+    if not np.all(np.isfinite(r)):
+        raise ValueError("the model gives non-finite forces at the initial values")
+
+
 def _with_value(fn):
     def both(z):
         r = fn(z)
@@ -415,6 +431,7 @@ def fit(curve, model="unit-mesh", *, free=("EI",), fixed: dict | None = None, in
                           model_options=model_options)
     residuals, free, table = problem["residuals"], problem["free"], problem["table"]
     t0 = time.perf_counter()
+    _check_start(residuals, problem)
     jac = jax.jit(jax.jacfwd(_with_value(residuals), has_aux=True))  # one path per evaluation
     bar = _Progress(progress, int(max_iterations))
 

@@ -206,4 +206,7 @@ def make_fit_model(model, **options) -> FitModel:
         return model
     if model not in FIT_MODELS:
         raise ValueError(f"unknown model {model!r}; use one of {sorted(FIT_MODELS)} or a socbjax.FitModel")
-    return FIT_MODELS[model](**options)
+    try:
+        return FIT_MODELS[model](**options)
+    except TypeError as err:
+        raise ValueError(f"invalid option for the {model} model: {err}") from None

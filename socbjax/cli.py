@@ -1,4 +1,4 @@
-"""Command line: ``socbjax demo | simulate | plot`` (also ``python -m socbjax ...``).
+"""Command line: ``socbjax demo | simulate | plot | fit`` (also ``python -m socbjax ...``).
 
 Units everywhere: µm, pN, s; EI in pN·µm²; angles in degrees on the command line.
 """
@@ -8,6 +8,8 @@ from __future__ import annotations
 import argparse
 import sys
 from pathlib import Path
+
+from ._cli_fit import add_fit_parser, run_fit
 
 __all__ = ["main"]
 
@@ -114,6 +116,7 @@ def _parser() -> argparse.ArgumentParser:
     _add_demo(sub)
     _add_simulate(sub)
     _add_plot(sub)
+    add_fit_parser(sub)
     return parser
 
 
@@ -226,6 +229,11 @@ def main(argv: list[str] | None = None) -> int:
         return _simulate(args)
     if args.command == "plot":
         return _plot(args)
+    if args.command == "fit":
+        try:
+            return run_fit(args)
+        except (ValueError, FileNotFoundError, ImportError) as err:
+            raise SystemExit(f"socbjax fit: {err}") from None
     return 2  # pragma: no cover - argparse enforces the choices
 
 

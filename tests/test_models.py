@@ -1,0 +1,67 @@
+"""Fit models: the traced networks equal the builders' networks at the same values, the
+branch angle rebuilds the unit mesh exactly, and stiffness groups cover the segments."""
+
+import jax
+import numpy as np
+import pytest
+
+import socbjax as sj
+from socbjax._models import ColumnModel, OutcropModel, UnitMeshModel, _branch_orders
+
+
+def test_unit_mesh_geometry_at_its_own_angle_equals_the_builder():
+    model = UnitMeshModel(dim=2, branch_angle=70.0)
+    traced, built = model.network({"branch_angle": 70.0}), sj.unit_dendritic_mesh(branch_angle=70.0, dim=2)
+    for field in ("positions", "tangents", "lengths"):
+        np.testing.assert_allclose(np.asarray(getattr(traced, field)), np.asarray(getattr(built, field)), atol=1e-12)
+
+
+@pytest.mark.parametrize("angle", [40.0, 55.0, 80.0])
+def test_unit_mesh_daughter_grows_straight_to_the_surface_at_any_angle(angle):
+    """At angle α the daughter is straight from the mother's middle at α to the mother's axis,
+    (L/2)/cos α long, its tip on the surface (z = L): no pre-stress at any angle."""
+    model = UnitMeshModel(dim=2, branch_angle=70.0)
+    net = model.network({"branch_angle": angle})
+    strand = np.asarray(net.strand)
+    seg = np.asarray(net.segments)[strand == 1]
+    pos, t = np.asarray(net.positions), np.asarray(net.tangents)
+    a = np.deg2rad(angle)
+    direction = np.array([np.sin(a), np.cos(a)])
+    base = pos[seg[0, 0]]
+    np.testing.assert_allclose(base, [0.0, 0.5], atol=1e-12)
+    for node in seg[:, 1]:
+        chord = pos[node] - base
+        assert abs(chord[0] * direction[1] - chord[1] * direction[0]) < 1e-12  # on the line
+        np.testing.assert_allclose(t[node], direction, atol=1e-12)
+    assert float(np.asarray(net.lengths)[strand == 1].sum()) == pytest.approx(0.5 / np.cos(a), rel=1e-12)
+    assert pos[seg[-1, 1], 1] == pytest.approx(1.0, abs=1e-12)
+
+
+def test_branch_angle_derivative_of_the_geometry():
+    """d(daughter tip x)/dα = d[(L/2) tan α]/dα = (L/2)/cos²α (hinge slides along the surface)."""
+    model = UnitMeshModel(dim=2)
+    tip_x = jax.grad(lambda a: model.network({"branch_angle": a}).positions[-1, 0])(60.0)
+    assert float(tip_x) == pytest.approx(0.5 / np.cos(np.deg2rad(60.0)) ** 2 * np.pi / 180, rel=1e-12)
+
+
+def test_stiffness_groups():
+    model = UnitMeshModel(dim=2)
+    EI = np.asarray(model.stiffness({"EI": 0.1, "EI_daughter": 0.3}))
+    strand = np.asarray(model.base.strand)
+    assert np.all(EI[strand == 0] == 0.1) and np.all(EI[strand == 1] == 0.3)
+    outcrop = OutcropModel(generations=4, gap=3.0, dim=3, seed=0)
+    masks = np.array(list(outcrop.groups.values()))
+    assert np.all(masks.sum(axis=0) == 1)  # every segment in exactly one branching order
+    order = _branch_orders(outcrop.base)
+    assert order[0] == 0 and order.max() == len(outcrop.groups) - 1
+
+
+def test_column_model_and_errors():
+    model = ColumnModel(4, supports=("pinned", "pinned"), length=2.0)
+    assert model.gap == pytest.approx(2.0)
+    assert np.all(np.asarray(model.network({"EI": 0.5}).EI) == 0.5)
+    with pytest.raises(ValueError, match="no parameter"):
+        model.network({"branch_angle": 50.0})
+    with pytest.raises(ValueError, match="unknown model"):
+        sj.make_fit_model("cube")
+    assert sj.make_fit_model(model) is model
