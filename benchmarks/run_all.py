@@ -24,6 +24,8 @@ SCRIPTS = [
     "solve_timing",
     "linear_timing",
     "outcrop_compression",
+    "gradient_cost",
+    "fit_recovery",
 ]
 
 

@@ -60,7 +60,8 @@ class FitResult:
     values : every parameter the model was evaluated with (fitted and fixed).
     standard_errors : Gauss–Newton standard error of each free parameter.
     correlation, covariance : [p, p] over the free parameters.
-    loss : final ½ Σ r² (pN²); rms : √(Σ r²/m) (pN).
+    loss : final ½ Σ r² with r = (model − data)/σ (pN² when unweighted); rms : √(mean
+        (model − data)²) (pN).
     converged, message : whether the optimiser met its tolerance, and why it stopped.
     identifiable : False when two free parameters are (nearly) perfectly correlated or JᵀJ is
         singular — then the values are not determined by the data (see ``warnings``).
@@ -196,11 +197,25 @@ def _check_identifiable(model: FitModel, free, fixed) -> None:
 
 
 # ----------------------------------------------------------------------- the residuals
+def _sigma(sigma, m: int, curve) -> np.ndarray:
+    """Per-point force uncertainty [m] (pN): 1 (unweighted), a scalar, or one per point."""
+    if sigma is None:
+        return np.ones(m)
+    s = np.asarray(sigma, float)
+    if s.ndim == 1 and isinstance(curve, ForceCurve) and s.size != m:
+        raise ValueError("per-point sigma needs the curve as (compression, force) arrays (ForceCurves may be binned)")
+    s = np.broadcast_to(s, (m,)) if s.ndim == 0 else s
+    if s.shape != (m,) or not np.all(np.isfinite(s)) or np.any(s <= 0):
+        raise ValueError(f"sigma must be positive and finite, a scalar or one value per point ({m}), got shape {s.shape}")
+    return np.array(s)
+
+
 def fit_problem(curve, model="unit-mesh", *, free=("EI",), fixed=None, initial=None, bounds=None, branch="loading",
-                max_points: int = 80, min_compression=None, method: str = "displacement", settings=None,
-                model_options=None) -> dict:
+                max_points: int = 80, min_compression=None, method: str = "arclength", settings=None,
+                model_options=None, sigma=None) -> dict:
     """Everything :func:`fit` optimises, checked and assembled (no optimisation): a dict with
-    ``residuals`` (z [p] -> r [m], pN; traced, differentiable), ``to_values`` (z -> dict),
+    ``residuals`` (z [p] -> r [m]: (model − data)/σ; traced, differentiable; NaN where the
+    path cannot be followed, or a ``ConvergenceError`` with ``throw=True`` untraced), ``to_values`` (z -> dict),
     ``z0``, the data arrays, the parameter ``table`` and the model.  Useful to evaluate
     the loss or its gradient at chosen values (e.g. to check gradients)."""
     if branch not in BRANCHES:
@@ -231,24 +246,26 @@ def fit_problem(curve, model="unit-mesh", *, free=("EI",), fixed=None, initial=N
         values = {n: table[n].to_value(z[i]) for i, n in enumerate(free)}
         return {**fixed, **values}
 
-    c_j, F_j = jnp.asarray(c), jnp.asarray(F)
+    sigma = _sigma(sigma, c.size, curve)
+    c_j, F_j, sigma_j = jnp.asarray(c), jnp.asarray(F), jnp.asarray(sigma)
     unload = branch == "unloading"
     floor = 1e-6 * reach
 
-    def residuals(z):
+    def residuals(z, throw: bool = False):
         from ._compress import compress
 
         values = to_values(z)
-        network = model.network({n: values[n] for n in physical if n != "perturbation"})
+        network = model.network({n: values[n] for n in physical})
         u = c_j + values.get("contact_offset", 0.0)
         result = compress(network, reach, at=jnp.clip(u, floor, reach), unload=unload, method=method,
-                          settings=settings, perturbation=values.get("perturbation"))
+                          settings=settings, perturbation=values.get("perturbation"), throw=throw)
         force = result.force[c.size:][::-1] if unload else result.force
         predicted = values.get("force_scale", 1.0) * jnp.where(u > 0, force, 0.0) + values.get("baseline", 0.0)
-        return predicted - F_j
+        # a path that fails at these values gives NaN residuals: the optimiser rejects the step
+        return jnp.where(jnp.all(result.converged), (predicted - F_j) / sigma_j, jnp.nan)
 
     z0 = jnp.asarray([table[n].to_z(start[n]) for n in free])
-    return dict(residuals=residuals, to_values=to_values, z0=z0, compression=c, force=F, table=table,
+    return dict(residuals=residuals, to_values=to_values, z0=z0, compression=c, force=F, sigma=sigma, table=table,
                 free=free, fixed=fixed, model=model, reach=reach)
 
 
@@ -284,11 +301,9 @@ def _levenberg_marquardt(jac, z, max_iterations, tolerance, report):
         for _ in range(12):
             step = np.linalg.solve(A + damping * np.diag(scale), -g)
             trial = z + step
-            try:
-                J_new, r_new = (np.asarray(a) for a in jac(jnp.asarray(trial)))
-                loss_new = 0.5 * float(r_new @ r_new) if np.all(np.isfinite(r_new)) else math.inf
-            except Exception:  # noqa: BLE001  (the path could not be followed there: reject the step)
-                loss_new = math.inf
+            J_new, r_new = (np.asarray(a) for a in jac(jnp.asarray(trial)))
+            # NaN residuals: the path could not be followed at the trial values; reject the step
+            loss_new = 0.5 * float(r_new @ r_new) if np.all(np.isfinite(r_new)) and np.all(np.isfinite(J_new)) else math.inf
             evaluations += 1
             if loss_new < loss:
                 break
@@ -315,6 +330,11 @@ def _optax(loss_and_grad, loss_fn, z, optimizer, max_iterations, tolerance, lear
     converged, message = False, f"reached max_iterations={max_iterations}"
     for iteration in range(1, max_iterations + 1):
         loss, grad = loss_and_grad(z)
+        if not (np.isfinite(float(loss)) and np.all(np.isfinite(np.asarray(grad)))):
+            z = jnp.asarray(history[-2]["z"]) if len(history) > 1 else z
+            message = (f"stopped at iteration {iteration}: the path could not be followed at the optimiser's step; "
+                       "use optimizer='lm' (which rejects such steps) or a smaller learning_rate")
+            break
         if optimizer == "lbfgs":
             updates, state = opt.update(grad, state, z, value=loss, grad=grad, value_fn=loss_fn)
         else:
@@ -336,7 +356,7 @@ def _check_start(residuals, problem) -> None:
     from ._solve import ConvergenceError
 
     try:
-        r = np.asarray(residuals(problem["z0"]))
+        r = np.asarray(residuals(problem["z0"], throw=True))
     except ConvergenceError as err:
         raise ValueError(
             f"the model cannot be evaluated over the data's compression range (up to {problem['reach']:.4g} µm) at the "
@@ -391,8 +411,8 @@ def _uncertainties(J, r, z, table, free):
 def fit(curve, model="unit-mesh", *, free=("EI",), fixed: dict | None = None, initial: dict | None = None,
         bounds: dict | None = None, branch: str = "loading", optimizer: str = "lm", max_iterations: int = 30,
         tolerance: float = 1e-8, learning_rate: float = 0.05, max_points: int = 80, min_compression=None,
-        method: str = "displacement",
-        settings=None, model_options: dict | None = None, progress: bool = False) -> FitResult:
+        method: str = "arclength",
+        settings=None, model_options: dict | None = None, sigma=None, progress: bool = False) -> FitResult:
     """Fit model parameters to a force–compression curve (see the module docstring).
 
     Parameters
@@ -415,7 +435,11 @@ def fit(curve, model="unit-mesh", *, free=("EI",), fixed: dict | None = None, in
     max_points : curves with more points are averaged in this many compression bins.
     min_compression : drop points below this compression (µm); default for a ForceCurve
         −¼ of its maximum compression (some baseline before contact, not the whole approach).
-    method, settings : path following of :func:`socbjax.compress`.
+    method, settings : path following of :func:`socbjax.compress` (default pseudo-arclength:
+        a snap-through inside the data range does not stop the path).
+    sigma : force uncertainty per point (pN; scalar or [m] for array curves): weighted least
+        squares, residuals (model − data)/σ; standard errors are scaled by the residual
+        variance either way (like ``scipy.optimize.curve_fit`` with ``absolute_sigma=False``).
     progress : a progress line over optimiser iterations on stderr.
 
     Returns a :class:`FitResult`.  Raises ``ValueError`` for unknown or doubly-specified
@@ -428,7 +452,7 @@ def fit(curve, model="unit-mesh", *, free=("EI",), fixed: dict | None = None, in
         raise ValueError(f"max_iterations must be a positive integer, got {max_iterations!r}")
     problem = fit_problem(curve, model, free=free, fixed=fixed, initial=initial, bounds=bounds, branch=branch,
                           max_points=max_points, min_compression=min_compression, method=method, settings=settings,
-                          model_options=model_options)
+                          model_options=model_options, sigma=sigma)
     residuals, free, table = problem["residuals"], problem["free"], problem["table"]
     t0 = time.perf_counter()
     _check_start(residuals, problem)
@@ -459,10 +483,11 @@ def fit(curve, model="unit-mesh", *, free=("EI",), fixed: dict | None = None, in
     for h in history:
         h["values"] = _float_values(problem["to_values"](jnp.asarray(h.pop("z"))))
     se, corr, cov, identifiable, warnings = _uncertainties(J, r, np.asarray(z), table, free)
+    weighted, r = r, r * problem["sigma"]  # back to pN
     units = {n: table[n].unit for n in values}
     return FitResult(
         model=problem["model"].name, names=free, values=values, standard_errors=dict(zip(free, map(float, se))),
-        correlation=corr, covariance=cov, loss=0.5 * float(r @ r), rms=float(np.sqrt(np.mean(r**2))),
+        correlation=corr, covariance=cov, loss=0.5 * float(weighted @ weighted), rms=float(np.sqrt(np.mean(r**2))),
         converged=bool(converged), message=message, identifiable=identifiable, warnings=warnings, history=history,
         compression=problem["compression"], force=problem["force"], model_force=problem["force"] + r, units=units,
         optimizer=optimizer, n_evaluations=int(evaluations) + 1, elapsed_s=time.perf_counter() - t0,

@@ -30,7 +30,8 @@ __all__ = ["implicit_root"]
 
 
 def _newton(F: Callable, x0: Array, linsolver, atol: float, max_iterations: int) -> tuple[Array, Array]:
-    """Undamped Newton from a close warm start: (x, iterations)."""
+    """Newton from a close warm start, steps halved (up to 8 times) until ‖F‖₂ decreases:
+    (x, iterations)."""
 
     def cond(carry):
         _, r, it = carry
@@ -39,8 +40,20 @@ def _newton(F: Callable, x0: Array, linsolver, atol: float, max_iterations: int)
     def body(carry):
         x, r, it = carry
         dx, _ = linsolver.solve(F, x, -r)
-        x = x + dx
-        return x, F(x), it + 1
+        norm = jnp.sum(r * r)
+
+        def shorter(ls):
+            alpha, _, r_new, k = ls
+            return ~(jnp.sum(r_new * r_new) < norm) & (k < 8)
+
+        def halve(ls):
+            alpha, _, _, k = ls
+            alpha = 0.5 * alpha
+            return alpha, x + alpha * dx, F(x + alpha * dx), k + 1
+
+        x_full = x + dx
+        _, x, r, _ = jax.lax.while_loop(shorter, halve, (jnp.ones((), x.dtype), x_full, F(x_full), 0))
+        return x, r, it + 1
 
     x, _, it = jax.lax.while_loop(cond, body, (x0, F(x0), jnp.zeros((), jnp.int32)))
     return x, it
@@ -60,7 +73,7 @@ def implicit_root(
     Parameters
     ----------
     F : residual x [n] -> [n] (dimensionless); may close over traced parameters.
-    x_guess : [n] warm start, close to the root (Newton is undamped).
+    x_guess : [n] warm start, close to the root (Newton with step halving).
     linsolver : a prepared :class:`DenseJacobianSolver` / :class:`SparseJacobianSolver`
         (``solve(fn, x, rhs, transpose=...)``), used for the Newton steps and for the
         tangent (J) and cotangent (Jᵀ) solves.

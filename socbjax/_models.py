@@ -23,8 +23,10 @@ Built-in models (``socbjax.fit(model="...")`` and the command line):
 
 Stiffness groups: a segment takes the value of its group's parameter (``EI_mother``,
 ``EI_gen2``, …) when that parameter is free or fixed in the fit, else the global ``EI``.
-``perturbation`` (pN) is the lateral force per strand; left out, :func:`socbjax.compress`
-uses 1e-4 EI/L², which scales with EI so that forces scale exactly with EI.
+``perturbation`` (pN) is the lateral force per strand.  Left out, the builder's loads (the
+outcrop's 1e-4 pN per strand) or :func:`socbjax.compress`'s default 1e-4 EI/L² are used,
+scaled with EI, so that forces scale exactly with EI; given (free or fixed), it replaces
+them and is passed to :func:`socbjax.compress` (``model.network`` then carries no loads).
 """
 
 from __future__ import annotations
@@ -89,10 +91,15 @@ class FitModel:
         if unknown:
             raise ValueError(f"{self.name} has no parameter(s) {sorted(unknown)}; it has {sorted(self.parameters)}")
         positions, tangents, lengths = self.geometry(values)
+        EI = self.stiffness(values)
+        if "perturbation" in values:  # given explicitly: compress(perturbation=...) applies it
+            loads = jnp.zeros_like(self.base.loads)
+        else:  # the builder's loads, scaled with EI so that forces scale exactly with EI
+            loads = self.base.loads * (jnp.mean(EI) / jnp.mean(jnp.asarray(self.base.EI)))
         return eqx.tree_at(
-            lambda n: (n.positions, n.tangents, n.lengths, n.EI),
+            lambda n: (n.positions, n.tangents, n.lengths, n.EI, n.loads),
             self.base,
-            (positions, tangents, lengths, self.stiffness(values)),
+            (positions, tangents, lengths, EI, loads),
         )
 
 
@@ -184,7 +191,7 @@ class OutcropModel(FitModel):
     name = "outcrop"
 
     def __init__(self, **builder):
-        builder = {"generations": 4, "gap": 3.0, "dim": 3, "perturbation": 0.0, **builder}
+        builder = {"generations": 4, "gap": 3.0, "dim": 3, **builder}
         builder.pop("EI", None)
         self.base = dendritic_outcrop(EI=_ACTIN_EI, **builder)
         order = _branch_orders(self.base)[np.asarray(self.base.strand)]

@@ -82,10 +82,12 @@ def _targets(at, displacement, traced: bool):
     return at
 
 
-def _bracket(U, X, u, rising: bool):
-    """Warm start at u on a branch with displacements U [k] (monotone in the main) and states
+def _bracket(U, X, same_side, u, rising: bool):
+    """Warm start at u on a branch with displacements U [k] (first crossing) and states
     X [k, n]: (x, u_eff, side) with side −1 before the branch start (clipped there), 0 inside,
-    +1 beyond the branch end (clipped there)."""
+    +1 beyond the branch end (clipped there).  Between two steps on the same side of a critical
+    point (``same_side`` [k−1]: equal sign det J) the states are interpolated; across one the
+    nearer step's state is used, so Newton starts on a branch, not between two."""
     beyond = U >= u if rising else U <= u
     if beyond[0]:
         return X[0], U[0], -1 if U[0] != u else 0
@@ -94,6 +96,8 @@ def _bracket(U, X, u, rising: bool):
         return X[-1], U[-1], 1
     j = int(hit[0])
     w = (u - U[j - 1]) / (U[j] - U[j - 1])
+    if not same_side[j - 1]:
+        return (X[j] if w >= 0.5 else X[j - 1]), u, 0
     return (1 - w) * X[j - 1] + w * X[j], u, 0
 
 
@@ -108,8 +112,9 @@ def _host_samples(rec, extra, at, unload, completed):
         idx = np.flatnonzero(PHASE == phase)
         idx = np.concatenate([[idx[0] - 1], idx]) if idx.size else np.array([len(U) - 1])
         signs = SIGN[idx] == sign_ref
+        same_side = SIGN[idx][1:] == SIGN[idx][:-1]
         for u in (at if phase == 1 else at[::-1]):
-            x, u_eff, side = _bracket(U[idx], X[idx], float(u), rising=phase == 1)
+            x, u_eff, side = _bracket(U[idx], X[idx], same_side, float(u), rising=phase == 1)
             j = int(np.searchsorted(U[idx], u_eff) if phase == 1 else np.searchsorted(-U[idx], -u_eff))
             stable = bool(signs[min(j, len(idx) - 1)] and signs[max(j - 1, 0)])
             reached = side <= 0 or (phase == 2 and completed)
