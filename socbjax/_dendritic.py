@@ -81,7 +81,7 @@ class _Grower:
         return tip
 
     def build(self, EI, perturbation, seed) -> Network:
-        from ._compress import strand_perturbation
+        from ._perturbation import strand_perturbation
 
         n, d = len(self.pos), self.dim
         fixed = [np.zeros((0, d)) for _ in range(n)]

@@ -211,7 +211,7 @@ def _sigma(sigma, m: int, curve) -> np.ndarray:
 
 
 def fit_problem(curve, model="unit-mesh", *, free=("EI",), fixed=None, initial=None, bounds=None, branch="loading",
-                max_points: int = 80, min_compression=None, method: str = "arclength", settings=None,
+                max_points: int = 80, min_compression=None, method: str = "displacement", settings=None,
                 model_options=None, sigma=None) -> dict:
     """Everything :func:`fit` optimises, checked and assembled (no optimisation): a dict with
     ``residuals`` (z [p] -> r [m]: (model − data)/σ; traced, differentiable; NaN where the
@@ -411,7 +411,7 @@ def _uncertainties(J, r, z, table, free):
 def fit(curve, model="unit-mesh", *, free=("EI",), fixed: dict | None = None, initial: dict | None = None,
         bounds: dict | None = None, branch: str = "loading", optimizer: str = "lm", max_iterations: int = 30,
         tolerance: float = 1e-8, learning_rate: float = 0.05, max_points: int = 80, min_compression=None,
-        method: str = "arclength",
+        method: str = "displacement",
         settings=None, model_options: dict | None = None, sigma=None, progress: bool = False) -> FitResult:
     """Fit model parameters to a force–compression curve (see the module docstring).
 
@@ -435,8 +435,9 @@ def fit(curve, model="unit-mesh", *, free=("EI",), fixed: dict | None = None, in
     max_points : curves with more points are averaged in this many compression bins.
     min_compression : drop points below this compression (µm); default for a ForceCurve
         −¼ of its maximum compression (some baseline before contact, not the whole approach).
-    method, settings : path following of :func:`socbjax.compress` (default pseudo-arclength:
-        a snap-through inside the data range does not stop the path).
+    method, settings : path following of :func:`socbjax.compress`: "displacement" (default,
+        the AFM's own control; stops with a clear error at a fold) or "arclength" (follows
+        snap-throughs; samples then take the first crossing of each compression).
     sigma : force uncertainty per point (pN; scalar or [m] for array curves): weighted least
         squares, residuals (model − data)/σ; standard errors are scaled by the residual
         variance either way (like ``scipy.optimize.curve_fit`` with ``absolute_sigma=False``).

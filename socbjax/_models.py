@@ -36,7 +36,8 @@ import jax.numpy as jnp
 import numpy as np
 
 from ._builders import column
-from ._compress import _gap, _strands, probe_network
+from ._compress import _gap, probe_network
+from ._perturbation import _strands
 from ._dendritic import dendritic_outcrop, unit_dendritic_mesh
 from ._network import Network
 from ._parameters import Parameter

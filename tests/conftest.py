@@ -26,3 +26,14 @@ def random_rotation(rng: np.random.Generator) -> np.ndarray:
     if np.linalg.det(q) < 0:
         q[:, 0] = -q[:, 0]
     return q
+
+
+@pytest.fixture(autouse=True, scope="module")
+def _release_compiled_code():
+    """Free each module's compiled executables afterwards: one process runs the whole suite,
+    and hundreds of network shapes (3D ones especially) otherwise accumulate in XLA's caches."""
+    yield
+    import gc
+
+    jax.clear_caches()
+    gc.collect()

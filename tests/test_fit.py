@@ -73,7 +73,9 @@ def test_optax_optimisers_reach_the_least_squares_EI(optimizer):
     result = sj.fit((c, F), model, free="EI", initial={"EI": 0.05}, optimizer=optimizer, tolerance=1e-12, **kwargs)
     assert result.values["EI"] == pytest.approx(best, rel=2e-3)
     lm = sj.fit((c, F), model, free="EI", initial={"EI": 0.05})
-    assert lm.values["EI"] == pytest.approx(best, rel=1e-6)
+    # LM stops on a relative loss decrease of 1e-8: far inside the standard error (~1 %)
+    assert lm.values["EI"] == pytest.approx(best, rel=1e-4)
+    assert abs(lm.values["EI"] - best) < 0.01 * lm.standard_errors["EI"]
 
 
 def test_EI_and_force_scale_are_refused_together():
@@ -135,3 +137,14 @@ def test_bad_input_is_refused_with_clear_messages():
         sj.fit((c, F), "spring")
     with pytest.raises(ValueError, match="no parameter"):
         UnitMeshModel(dim=2).network({"EI_gen3": 1.0})
+
+
+def test_unloading_branch_fit():
+    """The retract/unloading branch: a reversible column curve gives the same EI."""
+    model = ColumnModel(4, supports=("pinned", "pinned"))
+    c = np.linspace(0.02, 0.2, 6)
+    F = _synthetic(model, {"EI": 0.08}, c, seed=1, noise=0.0)
+    result = sj.fit((c, F), model, free="EI", initial={"EI": 0.05}, branch="unloading")
+    assert result.values["EI"] == pytest.approx(0.08, rel=1e-5)
+    with pytest.raises(ValueError, match="branch"):
+        sj.fit((c, F), model, branch="retract")
