@@ -480,6 +480,11 @@ def fit(curve, model="unit-mesh", *, free=("EI",), fixed: dict | None = None, in
             float(learning_rate), report)
     J, r = (np.asarray(a) for a in jac(jnp.asarray(z)))
     values = _float_values(problem["to_values"](jnp.asarray(z)))
+    if not (np.all(np.isfinite(r)) and np.all(np.isfinite(J))):
+        from ._solve import ConvergenceError
+
+        raise ConvergenceError(f"the fit ended at {values}, where the model path cannot be followed ({message}); "
+                               "use optimizer='lm' or other initial values")
     bar(len(history), 0.5 * float(r @ r), values, done=True)
     for h in history:
         h["values"] = _float_values(problem["to_values"](jnp.asarray(h.pop("z"))))
