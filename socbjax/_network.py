@@ -37,7 +37,10 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, Bool, Float, Int
 
-__all__ = ["Network", "make_network"]
+__all__ = ["Network", "make_network", "DIFFERENTIABLE_FIELDS"]
+
+# Network arrays that may carry traced (differentiated) values; everything else is structure.
+DIFFERENTIABLE_FIELDS = ("positions", "tangents", "lengths", "EI", "loads")
 
 
 class Network(eqx.Module):

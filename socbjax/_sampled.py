@@ -35,7 +35,7 @@ from jax.flatten_util import ravel_pytree
 from ._compress import _concat, _gap, _observe, probe_network, run_protocol
 from ._implicit import implicit_root
 from ._linear import SparseJacobianSolver, jacobian_solver
-from ._network import Network
+from ._network import DIFFERENTIABLE_FIELDS, Network
 from ._newton import Status
 from ._path import PathSettings
 from ._perturbation import _perturbation_plan, _strands, default_perturbation, perturbation_pattern
@@ -47,7 +47,6 @@ from ._sparsity import prepare_structured, structure_key
 
 __all__ = ["compress_at", "DIFFERENTIABLE_FIELDS"]
 
-DIFFERENTIABLE_FIELDS = ("positions", "tangents", "lengths", "EI", "loads")
 DEFAULT_SAMPLES = 64
 
 
@@ -61,7 +60,7 @@ def _check_structure(network: Network) -> None:
             raise TypeError(
                 f"Network.{name} depends on traced values; only {', '.join(DIFFERENTIABLE_FIELDS)} may be "
                 "differentiated (the topology, supports and probe are structure): build the network outside "
-                "jax.jit and replace only those arrays inside (e.g. eqx.tree_at or socbjax.with_parameters)"
+                "jax.jit and replace only those arrays inside (e.g. eqx.tree_at, or a socbjax.FitModel's network(values))"
             )
 
 

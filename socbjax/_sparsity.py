@@ -15,6 +15,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from ._linear import SparseJacobianSolver
+from ._network import DIFFERENTIABLE_FIELDS
 
 __all__ = ["structural_pattern", "prepare_structured"]
 
@@ -53,7 +54,7 @@ def structure_key(network, *extra) -> str:
 
     h = hashlib.sha256(repr((network.dim, extra)).encode())
     for name, value in sorted(vars(network).items()):
-        if name in ("positions", "tangents", "lengths", "EI", "loads"):
+        if name in DIFFERENTIABLE_FIELDS:
             h.update(repr((name, np.shape(value))).encode())
         elif hasattr(value, "shape"):
             a = np.asarray(value)
