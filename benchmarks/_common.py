@@ -134,6 +134,24 @@ def local_orders(n_nodes, errors):
     return [float("nan"), *out.tolist()]
 
 
+def time_solve(net, forces, model: str = "socb", repeats: int = 9):
+    """Wall times of ``socbjax.solve(net, forces, model=model)`` (s, until the positions are
+    ready): (first call including compilation, [the ``repeats`` later calls], last solution)."""
+    import jax
+
+    import socbjax as sj
+
+    def call():
+        t0 = time.perf_counter()
+        sol = sj.solve(net, forces, model=model, throw=True)
+        jax.block_until_ready(sol.positions)
+        return time.perf_counter() - t0, sol
+
+    first, sol = call()
+    times = [call()[0] for _ in range(repeats)]
+    return first, times, sol
+
+
 class Timer:
     def __enter__(self):
         self.t0 = time.perf_counter()

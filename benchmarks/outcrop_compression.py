@@ -9,8 +9,18 @@ steps, Newton iterations, wall time after compilation and the time per Newton it
 per-step tangent solves are included in the total).  Also: one Jacobian assembly and one
 factor+solve in isolation at the largest size.
 
+**Sparse against dense Jacobian** (same protocol, same steps; both timed after compilation
+in the same process): the dense path (``linear_solver="dense"``: ``jax.jacfwd``, n jvps,
++ dense LU) costs O(n²)–O(n³) per Newton iteration, ~10 s at the 8-generation outcrop's
+6,858 unknowns, so its full ~500-iteration run would take over an hour here.  The full
+load–unload run is compared at 6 generations (1,800 unknowns), and at 8 generations both
+solvers run the same capped protocol (``PathSettings.max_attempts`` per phase: the settle
+phase and the first attempts of the loading phase), which gives the per-step ratio at full
+size.  The runs must take the same steps (checked: step count and the force curves agree).
+
 Run:  PYTHONPATH=. python benchmarks/outcrop_compression.py [--quick] [--out DIR]
-(--quick: 6 generations, 1 µm, one run including compilation — a smoke test; the machine has 2 cores, OPENBLAS_NUM_THREADS=1).
+(--quick: 6 generations, 1 µm, one run including compilation, and a 4-generation dense
+comparison — a smoke test; the machine has 2 cores, OPENBLAS_NUM_THREADS=1).
 """
 
 from __future__ import annotations
@@ -18,6 +28,7 @@ from __future__ import annotations
 import time
 
 import _common  # noqa: F401  (sets OPENBLAS_NUM_THREADS before numpy loads)
+import equinox as eqx
 import numpy as np
 
 import socbjax as sj
@@ -46,12 +57,46 @@ def run(generations: int, displacement: float, max_step: float, repeat: bool = T
         "completed": result.completed,
         "first_run_s": first,
         "wall_s": wall,
+        "compile_s": first - wall if repeat else None,
         "ms_per_iteration": 1e3 * wall / max(iterations, 1),
         "peak_force_pN": float(result.force.max()),
         "displacement_at_peak_um": float(result.displacement[int(np.argmax(result.force))]),
         "force_at_max_displacement_pN": float(result.force[result.phase == 1][-1]),
         "events": [(p.kind, p.phase, round(p.displacement, 4), round(p.force, 5)) for p in result.limit_points],
     }
+
+
+def versus_dense(generations: int, displacement: float, max_step: float, max_attempts: int | None, gap: float = 6.0) -> dict:
+    """The protocol with the sparse and with the dense Jacobian solver, each timed after a
+    compiling warm-up (one attempt per phase); ``max_attempts`` caps every phase."""
+    net = sj.dendritic_outcrop(generations=generations, gap=gap, seed=0)
+    base = sj.PathSettings(max_step=max_step, initial_step=min(0.02, max_step))
+    capped = eqx.tree_at(lambda s: s.max_attempts, base, max_attempts or base.max_attempts)
+    out = {"generations": generations, "segments": net.n_segments, "max_attempts_per_phase": max_attempts}
+    for kind in ("sparse", "dense"):
+        warm = eqx.tree_at(lambda s: s.max_attempts, base, 1)
+        t0 = time.perf_counter()
+        sj.compress(net, displacement, unload=True, method="arclength", settings=warm, linear_solver=kind, throw=False)
+        compile_s = time.perf_counter() - t0
+        t0 = time.perf_counter()
+        result = sj.compress(net, displacement, unload=True, method="arclength", settings=capped, linear_solver=kind, throw=False)
+        wall = time.perf_counter() - t0
+        iterations = int(result.iterations.sum())
+        out[kind] = {"wall_s": wall, "warmup_s": compile_s, "steps": result.n_steps, "newton_iterations": iterations,
+                     "completed": result.completed, "ms_per_iteration": 1e3 * wall / max(iterations, 1),
+                     "force": result.force}
+        print(f"  {generations} generations, {kind:6s}: {result.n_steps} steps, {iterations} iterations, {wall:.1f} s "
+              f"(warm-up {compile_s:.1f} s){'' if result.completed else ' (capped)'}", flush=True)
+    s_, d_ = out["sparse"], out["dense"]
+    out["same_steps"] = s_["steps"] == d_["steps"]
+    m = min(len(s_["force"]), len(d_["force"]))
+    scale = max(float(np.abs(s_["force"][:m]).max()), 1e-300)
+    out["max_force_difference_rel"] = float(np.abs(s_["force"][:m] - d_["force"][:m]).max()) / scale
+    out["ratio_wall"] = d_["wall_s"] / s_["wall_s"]
+    out["ratio_per_iteration"] = d_["ms_per_iteration"] / s_["ms_per_iteration"]
+    for kind in ("sparse", "dense"):
+        out[kind]["force"] = None  # keep the JSON small
+    return out
 
 
 def main(argv=None) -> int:
@@ -69,7 +114,17 @@ def main(argv=None) -> int:
     verdict = big["completed"] and big["steps"] >= 200 and big["wall_s"] < 60
     print(f"\nlargest: {big['segments']} segments, {big['steps']} steps in {big['wall_s']:.1f} s after compilation "
           f"({'meets' if verdict else 'misses'} the ≥200 steps / <60 s target)")
-    _common.write_json(args.out, "outcrop_compression", args, {"displacement_um": disp, "max_step_um": step, "rows": rows})
+    print("\nsparse vs dense Jacobian (same protocol, after compilation):")
+    plan = [(3, 0.5, 0.05, None, 2.0)] if args.quick else [(6, disp, step, None), (8, disp, step, 12)]
+    dense = [versus_dense(*p) for p in plan]
+    print(f"{'gen':>3} {'segments':>8} {'cap/phase':>9} {'steps':>5} {'iters':>5} {'sparse s':>8} {'dense s':>8} "
+          f"{'dense/sparse':>12} {'per iteration':>13} {'same steps':>10} {'max dF/F':>8}")
+    for d in dense:
+        print(f"{d['generations']:>3} {d['segments']:>8} {str(d['max_attempts_per_phase'] or 'full'):>9} {d['sparse']['steps']:>5} "
+              f"{d['sparse']['newton_iterations']:>5} {d['sparse']['wall_s']:>8.2f} {d['dense']['wall_s']:>8.2f} "
+              f"{d['ratio_wall']:>12.1f} {d['ratio_per_iteration']:>13.1f} {str(d['same_steps']):>10} {d['max_force_difference_rel']:>8.1e}")
+    _common.write_json(args.out, "outcrop_compression", args,
+                       {"displacement_um": disp, "max_step_um": step, "rows": rows, "versus_dense": dense})
     return 0
 
 

@@ -23,9 +23,12 @@ SCRIPTS = [
     "fig5c_buckling_error",
     "solve_timing",
     "linear_timing",
+    "scaling",
     "outcrop_compression",
+    "ensemble_throughput",
     "gradient_cost",
     "fit_recovery",
+    "peers/elastica_comparison",  # PyElastica columns only with the extra socbjax[peers]
 ]
 
 

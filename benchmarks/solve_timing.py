@@ -47,14 +47,7 @@ def time_case(model: str, dim: int, n: int, repeats: int) -> dict:
     net = sj.cantilever(n, dim=dim)
     force = [0.0, LOAD] + [0.0] * (dim - 2)
 
-    def call():
-        t0 = time.perf_counter()
-        sol = sj.solve(net, {-1: force}, model=model, throw=True)
-        jax.block_until_ready(sol.positions)
-        return time.perf_counter() - t0, sol
-
-    first, sol = call()
-    times = [call()[0] for _ in range(repeats)]
+    first, times, sol = C.time_solve(net, {-1: force}, model=model, repeats=repeats)
     rec = {"model": model, "dim": dim, "n": n, "first_call_s": first, "median_s": float(np.median(times)),
            "min_s": float(np.min(times)), "times_s": times, "compile_s": first - float(np.median(times)),
            "iterations": int(sol.iterations), "steps": int(sol.steps), "cutbacks": int(sol.cutbacks),

@@ -17,6 +17,7 @@ from ._afm import ForceCurve, load_curve, save_curve  # noqa: E402
 from ._builders import SUPPORTS, cantilever, column  # noqa: E402
 from ._compress import compress, probe_network, strand_perturbation  # noqa: E402
 from ._dendritic import dendritic_outcrop, unit_dendritic_mesh  # noqa: E402
+from ._ensemble import EnsembleResult, compress_ensemble  # noqa: E402
 from ._continuation import ContinuationResult, ContinuationSettings, load_continuation  # noqa: E402
 from ._fit import FitResult, fit, fit_problem  # noqa: E402
 from ._fit_figure import plot_fit, save_fit_figure  # noqa: E402
@@ -32,7 +33,10 @@ from ._path import PathSettings  # noqa: E402
 from ._quadrature import coupling_matrix, gauss_legendre, quintic_coefficients  # noqa: E402
 from ._residual import SOCBModel, SOCBState, socb_residual  # noqa: E402
 from ._result import PHASES, CompressionResult, LimitPoint  # noqa: E402
-from ._solve import MODELS, ConvergenceError, Solution, buckling_load, forces_array, make_model, solve  # noqa: E402
+from ._solve import (  # noqa: E402
+    MODELS, ConvergenceError, Solution, buckling_load, default_atol, forces_array, make_model, prepare_jacobian_solver, solve,
+)
+from ._linear import DenseJacobianSolver, SparseJacobianSolver  # noqa: E402
 
 __version__ = "0.1.0"
 
@@ -43,6 +47,8 @@ __all__ = [
     "cantilever",
     "column",
     "compress",
+    "compress_ensemble",
+    "EnsembleResult",
     "implicit_root",
     "fit",
     "fit_problem",
@@ -79,6 +85,10 @@ __all__ = [
     "load_checkpoint",
     "SUPPORTS",
     "solve",
+    "default_atol",
+    "prepare_jacobian_solver",
+    "DenseJacobianSolver",
+    "SparseJacobianSolver",
     "buckling_load",
     "Solution",
     "Status",

@@ -136,6 +136,15 @@ class _Problem(eqx.Module):
         return make
 
 
+def traced_settings(settings):
+    """``settings`` with its numeric fields as arrays: ``eqx.filter_jit`` traces arrays but
+    holds Python numbers static, so new step sizes or caps would otherwise recompile."""
+    def leaf(v):
+        return v if isinstance(v, bool) else jnp.asarray(v)
+
+    return jax.tree_util.tree_map(leaf, settings)
+
+
 @eqx.filter_jit
 def _start(problem, x0, weights, linsolver, settings):
     _, unravel = ravel_pytree(problem.model.initial_state())
@@ -456,12 +465,13 @@ class _Protocol:
             problem, scale, x_start, ends = self._phase(index)
             weights = path_weights(self.x0, self.geometry, self.network.n_nodes, scale)
             resumed = self.saved is not None and index == self.start
-            carry = self.saved if resumed else _start(problem, x_start, weights, self.linsolver, self.settings)
+            settings = traced_settings(self.settings)
+            carry = self.saved if resumed else _start(problem, x_start, weights, self.linsolver, settings)
 
             def report(p, steps, done, name=self.names[index], ends=ends):
                 self.progress(name, ends[0] + p * (ends[1] - ends[0]), steps, done)
 
-            carry = _run_phase(problem, carry, weights, scale, self.linsolver, self.settings, self.chunk, report, lambda c, i=index: self._save(i, c))
+            carry = _run_phase(problem, carry, weights, scale, self.linsolver, settings, self.chunk, report, lambda c, i=index: self._save(i, c))
             status = int(carry["status"])
             self._finish(index, carry, ends)
             if status != Status.CONVERGED:

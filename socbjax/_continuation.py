@@ -86,11 +86,16 @@ def load_continuation(
         return lambda x: model.residual(unravel(x), lam * loads, frames)
 
     def analyse(x, lam, frames, jac):
-        """sign(det J) and the path tangent dx/dλ = −J⁻¹ ∂R/∂λ near an equilibrium x (J is
-        Newton's last Jacobian, within its quadratic-convergence neighbourhood of x)."""
+        """sign(det J) and the path tangent dx/dλ = −J⁻¹ ∂R/∂λ near an equilibrium x.  Dense:
+        J is Newton's last Jacobian (within its quadratic-convergence neighbourhood of x), so
+        this costs one solve; with a ``jacobian_solver`` J is assembled and factored at x."""
         _, dr_dlam = jax.jvp(lambda l: model.residual(unravel(x), l * loads, frames), (lam,), (jnp.ones_like(lam),))
-        tangent = -jnp.linalg.solve(jac, dr_dlam)
-        sign = jnp.linalg.slogdet(jac)[0] if settings.check_path_continuity else jnp.ones((), dtype)
+        if solver.jacobian_solver is None:
+            tangent = -jnp.linalg.solve(jac, dr_dlam)
+            sign = jnp.linalg.slogdet(jac)[0]
+        else:
+            tangent, sign = solver.jacobian_solver.solve(residual_fn(lam, frames), x, -dr_dlam)
+        sign = sign if settings.check_path_continuity else jnp.ones((), dtype)
         return sign, jnp.where(jnp.all(jnp.isfinite(tangent)), tangent, 0.0)
 
     def cond(c):

@@ -2,8 +2,13 @@
 
 The solver acts on a flat vector x and a residual ``fn(x) -> R`` of the same size (the
 SOCB and jointed systems are square).  Each iteration assembles the Jacobian by forward
-mode, solves J Δx = −R with a pluggable ``lineax`` solver (dense LU by default) and takes
-the largest step α ∈ {1, ½, ¼, …} that decreases ‖R‖₂ (Armijo backtracking on ½‖R‖²).
+mode, solves J Δx = −R and takes the largest step α ∈ {1, ½, ¼, …} that decreases ‖R‖₂
+(Armijo backtracking on ½‖R‖²).  The linear algebra is pluggable: by default the dense
+``jax.jacfwd`` Jacobian and a ``lineax`` solver (dense LU); with ``jacobian_solver`` set to a
+prepared :class:`~socbjax._linear.SparseJacobianSolver` (or any object with the same
+``solve(fn, x, rhs) -> (X, sign det J)`` method) the Jacobian is never formed densely, so
+one iteration costs O(n) for the tree-structured SOCB systems (colour-compressed jvps plus
+a sparse LU; see ``docs/scaling.md``).
 Convergence is ‖R‖_∞ ≤ ``atol`` on the dimensionless residual.  A result never hides a
 failure: ``status`` says why the iteration stopped.
 """
@@ -61,7 +66,8 @@ class NewtonResult(eqx.Module):
     status: Int[Array, ""]
     iterations: Int[Array, ""]
     residual_norm: Float[Array, ""]
-    jacobian: Float[Array, "n n"]  # J at the last iterate where it was assembled
+    jacobian: Float[Array, "n n"]  # J at the last iterate where it was assembled ([0, 0] with a jacobian_solver)
+    sign: Float[Array, ""] = None  # sign(det J) of the last factorisation (jacobian_solver only)
 
     @property
     def converged(self) -> Array:
@@ -76,13 +82,19 @@ class NewtonSolver(eqx.Module):
     atol : convergence threshold on ‖R‖_∞ of the dimensionless residual.
     max_iterations : Newton iterations before giving up (``Status.MAX_ITERATIONS``).
     max_backtracks : step halvings allowed per iteration (``Status.LINE_SEARCH_FAILED``).
-    linear_solver : any square ``lineax`` solver (default dense LU).
+    linear_solver : any square ``lineax`` solver (default dense LU) for the dense Jacobian.
+    jacobian_solver : ``None`` (dense ``jax.jacfwd`` + ``linear_solver``) or a prepared
+        Jacobian solver from :mod:`socbjax._linear` (``DenseJacobianSolver``,
+        ``SparseJacobianSolver``) that assembles and factors J itself; then
+        ``NewtonResult.jacobian`` is empty ([0, 0]) and ``NewtonResult.sign`` carries
+        sign(det J) of the last factorisation.
     """
 
     atol: float = 1e-12
     max_iterations: int = 40
     max_backtracks: int = 16
     linear_solver: lx.AbstractLinearSolver = lx.LU()
+    jacobian_solver: object = None
 
     def __call__(self, fn: Callable[[Array], Array], x0: Float[Array, " n"]) -> NewtonResult:
         # At least one iteration is always taken, so that the returned Jacobian is that of
@@ -94,10 +106,13 @@ class NewtonSolver(eqx.Module):
             return carry[3] == _RUNNING
 
         def body(carry):
-            x, r, iteration, _, _ = carry
-            jac = jax.jacfwd(fn)(x)
-            sol = lx.linear_solve(lx.MatrixLinearOperator(jac), -r, self.linear_solver, throw=False)
-            step = sol.value
+            x, r, iteration, _, jac = carry
+            if self.jacobian_solver is None:
+                jac = jax.jacfwd(fn)(x)
+                step = lx.linear_solve(lx.MatrixLinearOperator(jac), -r, self.linear_solver, throw=False).value
+            else:
+                step, sign = self.jacobian_solver.solve(fn, x, -r)
+                jac = jnp.reshape(sign, (1, 1))  # only the determinant sign is carried
             merit = jnp.sum(r * r)
 
             def ls_cond(ls):
@@ -127,9 +142,13 @@ class NewtonSolver(eqx.Module):
             status = jnp.where((status == _RUNNING) & (iteration >= self.max_iterations), Status.MAX_ITERATIONS, status)
             return x_new, r_new, iteration, status.astype(jnp.int32), jac
 
-        init = (x0, r0, jnp.zeros((), jnp.int32), status0, jnp.zeros((x0.size, x0.size), x0.dtype))
+        size = x0.size if self.jacobian_solver is None else 1
+        init = (x0, r0, jnp.zeros((), jnp.int32), status0, jnp.zeros((size, size), x0.dtype))
         x, r, iterations, status, jac = jax.lax.while_loop(cond, body, init)
-        return NewtonResult(x=x, status=status, iterations=iterations, residual_norm=_inf_norm(r), jacobian=jac)
+        if self.jacobian_solver is None:
+            return NewtonResult(x=x, status=status, iterations=iterations, residual_norm=_inf_norm(r), jacobian=jac)
+        return NewtonResult(x=x, status=status, iterations=iterations, residual_norm=_inf_norm(r),
+                            jacobian=jnp.zeros((0, 0), x.dtype), sign=jac[0, 0])
 
 
 def _inf_norm(r: Array) -> Array:

@@ -83,3 +83,40 @@ def test_below_buckling_perfect_column_stays_straight():
     sol = sj.solve(sj.column(3, dim=2), {-1: [-2.0, 0.0]})
     np.testing.assert_allclose(sol.positions[:, 1], 0.0, atol=1e-12)
     np.testing.assert_allclose(sol.segment_forces, [[-2.0, 0.0]] * 2, atol=1e-12)
+
+
+# ----------------------------------------------------------------- sparse Jacobian solver
+def test_sparse_and_dense_agree_on_a_branched_3d_network():
+    net = sj.dendritic_outcrop(generations=3, gap=30.0, dim=3, seed=2)  # root clamped, tips free
+    rng = np.random.default_rng(0)
+    forces = 0.02 * rng.normal(size=(net.n_nodes, 3))
+    dense = sj.solve(net, forces, linear_solver="dense")
+    sparse = sj.solve(net, forces, linear_solver="sparse")
+    assert dense.converged and sparse.converged
+    assert int(sparse.steps) == int(dense.steps) and int(sparse.iterations) == int(dense.iterations)
+    np.testing.assert_allclose(sparse.positions, dense.positions, atol=1e-11)
+    moved = np.abs(np.asarray(dense.positions) - np.asarray(net.positions)).max()
+    assert moved > 0.05  # a real deflection, not the trivial state
+
+
+@pytest.mark.slow
+def test_long_chain_sparse_matches_exact_elastica():
+    """3,000 segments, P L²/EI = 2: the residual's round-off floor (ε max|r|/ℓ ≈ 7e-13) is
+    above 1e-12 here, so default_atol raises the tolerance; the tip still matches the exact
+    elastica (diffrax shooting) to the solver's accuracy."""
+    from socbjax._reference import elastica_tip_deflection
+
+    length, EI, n_seg = 10.0, 1.0, 3000
+    net = sj.cantilever(n_nodes=n_seg + 1, length=length, EI=EI, dim=2)
+    assert sj.default_atol(net) > 1e-12
+    sol = sj.solve(net, {-1: [0.0, 2.0 * EI / length**2]})  # "auto" -> sparse at 18,004 unknowns
+    dx, dy = elastica_tip_deflection(2.0)
+    tip = np.asarray(sol.positions[-1]) / length
+    assert sol.converged
+    assert abs(1.0 - tip[0] - dx) < 1e-9 and abs(tip[1] - dy) < 1e-9
+
+
+def test_default_atol():
+    assert sj.default_atol(sj.cantilever(5, dim=2)) == 1e-12
+    floor = sj.default_atol(sj.cantilever(10001, length=10.0, dim=2))
+    assert 2e-11 < floor < 5e-11  # 16 ε · 10 µm / 1 nm

@@ -1,0 +1,224 @@
+"""Cost of one Newton iteration against network size: linear in the number of segments.
+
+Two families, each size measured in its own Python process (so memory is that size's own):
+
+* **chain**: a 2D cantilever of S segments (10 µm, EI = 1 pN·µm²), S = 100 … 10,000; at
+  each size the large-deflection tip load P L²/EI = 2 is solved by :func:`socbjax.solve`
+  with the sparse Jacobian solver (time after compilation, steps, Newton iterations, tip
+  error against the exact elastica) and one Newton iteration is timed at the solution;
+* **branched**: random 3D dendritic outcrops (:func:`socbjax.dendritic_outcrop`, gap 30 µm so
+  no strand reaches the surface: every generation doubles the strands; seed 0),
+  6 … 12 generations = 126 … 8,190 segments (13 generations, 16,382 segments, in full mode
+  too); one Newton iteration is timed at the straight state plus 1e-3 noise.
+
+One Newton iteration = residual + colour-compressed sparse Jacobian (one vmapped jvp over the
+column colours) + SuperLU factorisation (COLAMD ordering) and solve, i.e. exactly what
+``NewtonSolver(jacobian_solver=...)`` does per iteration.  Reported per size: unknowns,
+Jacobian non-zeros, colours, one-off host preparation, compile, medians (of 7) of the whole
+iteration and of its two parts, memory (XLA buffers of the compiled iteration + the L and U
+factors, and the process's peak RSS), and the log-log slopes of time and memory against
+segments between 1,000 and 10,000 segments.  Acceptance (issue 5): slope ≤ 1.2 and the
+10,000-segment chain solved in < 10 s after compilation.
+
+Run:  PYTHONPATH=. python benchmarks/scaling.py [--quick] [--out DIR]
+"""
+
+from __future__ import annotations
+
+import os
+
+os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
+
+import json
+import resource
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+
+import _common as C
+import numpy as np
+
+NAME = "scaling"
+LENGTH, EI, LOAD = 10.0, 1.0, 2.0  # µm, pN·µm², P L²/EI
+REPEATS = 7
+
+
+def _median_ms(f, repeats=REPEATS):
+    times = []
+    for _ in range(repeats):
+        t0 = time.perf_counter()
+        f()
+        times.append(time.perf_counter() - t0)
+    return 1e3 * float(np.median(times))
+
+
+def _network(family: str, size: int):
+    import socbjax as sj
+
+    if family == "chain":
+        return sj.cantilever(n_nodes=size + 1, length=LENGTH, EI=EI, dim=2)
+    return sj.dendritic_outcrop(generations=size, gap=30.0, dim=3, seed=0)
+
+
+def _solve_chain(net, out: dict) -> None:
+    """The large-deflection load, after compilation; tip error against the exact elastica."""
+    import jax
+
+    import socbjax as sj
+
+    P = LOAD * EI / LENGTH**2
+    t0 = time.perf_counter()
+    sol = sj.solve(net, {-1: [0.0, -P]}, linear_solver="sparse")
+    jax.block_until_ready(sol.positions)
+    out["solve_first_s"] = time.perf_counter() - t0
+    times = []
+    for _ in range(3):
+        t0 = time.perf_counter()
+        sol = sj.solve(net, {-1: [0.0, -P]}, linear_solver="sparse")
+        jax.block_until_ready(sol.positions)
+        times.append(time.perf_counter() - t0)
+    exact = C.exact_cantilever([LOAD])
+    tip = np.asarray(sol.positions[-1]) / LENGTH
+    err = np.hypot(1.0 - tip[0] - exact["dX"][0], -tip[1] - exact["dY"][0]) / np.hypot(exact["dX"][0], exact["dY"][0])
+    out.update(solve_s=float(np.median(times)), steps=int(sol.steps), iterations=int(sol.iterations),
+               residual=float(sol.residual_norm), tip_error=float(err), x0=sol.state)
+
+
+def measure(family: str, size: int) -> dict:
+    """One size, in this process (see module doc)."""
+    import jax
+    import jax.numpy as jnp
+    import scipy.sparse as sp
+    import scipy.sparse.linalg as spla
+
+    import socbjax  # noqa: F401  (float64)
+    from socbjax._solve import make_model, prepare_jacobian_solver
+
+    net = _network(family, size)
+    disc = make_model(net)
+    state0 = disc.initial_state()
+    x_init, unravel = jax.flatten_util.ravel_pytree(state0)
+    out = dict(family=family, size=size, segments=int(net.n_segments), unknowns=int(x_init.size))
+    t0 = time.perf_counter()
+    js = prepare_jacobian_solver(disc, "sparse")
+    out.update(prepare_s=time.perf_counter() - t0, nnz=js.nnz, colors=js.n_colors)
+    if family == "chain":
+        _solve_chain(net, out)
+        x = jax.flatten_util.ravel_pytree(out.pop("x0"))[0]
+        loads = jnp.zeros_like(net.positions).at[-1, 1].set(-LOAD * EI / LENGTH**2)
+    else:
+        x = x_init + 1e-3 * jnp.asarray(np.random.default_rng(0).standard_normal(x_init.size))
+        loads = jnp.zeros_like(net.positions)
+    frames = disc.frames(unravel(x))
+
+    def fn(y):
+        return disc.residual(unravel(y), loads, frames)
+
+    iteration = jax.jit(lambda y: js.solve(fn, y, -fn(y)))
+    assemble = jax.jit(lambda y: js.jacobian_values(fn, y))
+    t0 = time.perf_counter()
+    compiled = iteration.lower(x).compile()
+    out["compile_s"] = time.perf_counter() - t0
+    mem = compiled.memory_analysis()
+    xla_bytes = sum(int(getattr(mem, k, 0) or 0) for k in ("temp_size_in_bytes", "argument_size_in_bytes", "output_size_in_bytes"))
+    step, sign = iteration(x)
+    out["step_finite"] = bool(np.all(np.isfinite(np.asarray(step)))) and float(sign) != 0.0
+    jax.block_until_ready(assemble(x))
+    out["iteration_ms"] = _median_ms(lambda: jax.block_until_ready(iteration(x)))
+    out["assembly_ms"] = _median_ms(lambda: jax.block_until_ready(assemble(x)))
+    vals = np.asarray(assemble(x))
+    rhs = np.asarray(-fn(x))
+    A = sp.csc_matrix((vals, js.rows.a, js.indptr.a), shape=(js.n, js.n))
+    out["factor_solve_ms"] = _median_ms(lambda: spla.splu(A, permc_spec=js.permc_spec).solve(rhs))
+    lu = spla.splu(A, permc_spec=js.permc_spec)
+    out["lu_nnz"] = int(lu.L.nnz + lu.U.nnz)
+    out["memory_mb"] = (xla_bytes + 12 * out["lu_nnz"] + 12 * js.nnz) / 2**20
+    out["peak_rss_mb"] = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
+    return out
+
+
+def _run_child(family: str, size: int) -> dict:
+    env = dict(os.environ)
+    env["PYTHONPATH"] = os.pathsep.join(filter(None, [str(Path(__file__).resolve().parents[1]), env.get("PYTHONPATH", "")]))
+    cmd = [sys.executable, __file__, "--child", family, str(size)]
+    done = subprocess.run(cmd, env=env, capture_output=True, text=True)
+    if done.returncode != 0:
+        raise RuntimeError(f"{family} {size} failed:\n{done.stdout[-2000:]}\n{done.stderr[-3000:]}")
+    return json.loads(done.stdout.strip().splitlines()[-1])
+
+
+def slope(rows, key, lo=1000, hi=10000):
+    pts = [(r["segments"], r[key]) for r in rows if lo * 0.9 <= r["segments"] <= hi * 1.7 and r.get(key)]
+    if len(pts) < 2:
+        return None
+    s, v = np.log(np.array(pts, float)).T
+    return float(np.polyfit(s, v, 1)[0])
+
+
+def _figure(results, args):
+    plt = C.pyplot()
+    fig, axes = plt.subplots(1, 2, figsize=(10, 4))
+    for family, marker in (("chain", "o"), ("branched", "s")):
+        rows = results[family]
+        s = [r["segments"] for r in rows]
+        axes[0].loglog(s, [r["iteration_ms"] for r in rows], marker + "-", label=f"{family}: iteration")
+        axes[0].loglog(s, [r["assembly_ms"] for r in rows], marker + ":", label=f"{family}: Jacobian assembly")
+        axes[0].loglog(s, [r["factor_solve_ms"] for r in rows], marker + "--", label=f"{family}: SuperLU factor+solve")
+        axes[1].loglog(s, [r["memory_mb"] for r in rows], marker + "-", label=f"{family}: XLA buffers + LU")
+    ref = np.array([100, 16000])
+    axes[0].loglog(ref, 0.05 * ref, "k-", lw=0.5, label="slope 1")
+    axes[0].set(xlabel="segments", ylabel="ms per Newton iteration", title="Newton iteration cost")
+    axes[1].set(xlabel="segments", ylabel="MiB", title="memory of one iteration")
+    for ax in axes:
+        ax.legend(fontsize=7)
+        ax.grid(True, which="both", alpha=0.3)
+    C.save_figure(fig, args.out, NAME)
+
+
+def main(argv=None) -> int:
+    argv = sys.argv[1:] if argv is None else argv
+    if argv and argv[0] == "--child":
+        print(json.dumps(C._jsonable(measure(argv[1], int(argv[2])))))
+        return 0
+    args = C.parse_args(__doc__, argv)
+    sizes = {"chain": [100, 200] if args.quick else [100, 300, 1000, 3000, 10000],
+             "branched": [3] if args.quick else [6, 7, 8, 9, 10, 11, 12, 13]}
+    results = {}
+    for family, family_sizes in sizes.items():
+        results[family] = []
+        for size in family_sizes:
+            row = _run_child(family, size)
+            results[family].append(row)
+            print(f"{family} {row['segments']:>6} segments: {row['iteration_ms']:8.1f} ms/iteration "
+                  f"(assembly {row['assembly_ms']:.1f}, SuperLU {row['factor_solve_ms']:.1f}), compile {row['compile_s']:.1f} s"
+                  + (f", solve {row['solve_s']:.2f} s, tip error {row['tip_error']:.1e}" if family == "chain" else ""), flush=True)
+    headers = ["family", "segments", "unknowns", "nnz(J)", "colours", "prepare s", "compile s", "iteration ms",
+               "assembly ms", "SuperLU ms", "memory MiB", "peak RSS MiB", "solve s", "steps/its", "tip error"]
+    rows = [[r["family"], r["segments"], r["unknowns"], r["nnz"], r["colors"], r["prepare_s"], r["compile_s"], r["iteration_ms"],
+             r["assembly_ms"], r["factor_solve_ms"], r["memory_mb"], r["peak_rss_mb"], r.get("solve_s"),
+             f"{r['steps']}/{r['iterations']}" if "steps" in r else None, r.get("tip_error")]
+            for fam in results.values() for r in fam]
+    C.print_table(headers, rows, "Newton iteration cost against size (medians of 7, after compilation)", spec=".3g")
+    slopes = {fam: {k: slope(results[fam], k) for k in ("iteration_ms", "assembly_ms", "factor_solve_ms", "memory_mb")}
+              for fam in results}
+    print("\nlog-log slopes against segments, 1,000 - 10,000 segments (+ the 16,382-segment outcrop):")
+    for fam, s in slopes.items():
+        print(f"  {fam:9s}: " + ", ".join(f"{k} {C.fmt(v, '.3f')}" for k, v in s.items()))
+    checks = {}
+    if not args.quick:
+        big = next(r for r in results["chain"] if r["segments"] == 10000)
+        checks = {"slope_iteration_le_1.2": all(s["iteration_ms"] is not None and s["iteration_ms"] <= 1.2 for s in slopes.values()),
+                  "chain_10000_solve_lt_10s": big["solve_s"] < 10.0}
+        for k, v in checks.items():
+            print(f"{'PASS' if v else 'FAIL'}: {k}")
+    C.write_json(args.out, NAME, args, {"results": results, "slopes": slopes, "checks": checks})
+    _figure(results, args)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
