@@ -389,11 +389,11 @@ def compress_ensemble(
     and each member as a :class:`CompressionResult` (``result.member(i)``), equal to
     ``socbjax.compress(networks[i], ...)`` up to round-off.
 
-    Example
-    -------
-    >>> net = sj.dendritic_outcrop(generations=4, gap=4.0, dim=2)
-    >>> ens = sj.compress_ensemble([eqx.tree_at(lambda n: n.EI, net, net.EI * s) for s in (0.5, 1, 2)], 0.5)
-    >>> ens.force.shape  # (3, M)
+    Example::
+
+        net = sj.dendritic_outcrop(generations=4, gap=4.0, dim=2)
+        ens = sj.compress_ensemble([eqx.tree_at(lambda n: n.EI, net, net.EI * s) for s in (0.5, 1, 2)], 0.5)
+        ens.force.shape  # (3, M); ens.member(1) is compress(members[1], 0.5)
     """
     nets = _check_members(networks)
     perturbations = _member_perturbations(perturbation, len(nets))

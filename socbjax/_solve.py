@@ -234,8 +234,17 @@ def solve(
             f"{float(solution.load_factor):.4g} of 1 after {int(solution.steps)} steps "
             f"({int(solution.cutbacks)} cut-backs), residual {float(solution.residual_norm):.2e}. "
             "Try more nodes, a smaller ContinuationSettings.initial_step, or throw=False to inspect."
+            + _atol_hint(solver, network)
         )
     return solution
+
+
+def _atol_hint(solver: NewtonSolver, network: Network) -> str:
+    floor = default_atol(network, 0.0)
+    if float(solver.atol) >= floor:
+        return ""
+    return (f" The Newton atol {float(solver.atol):.1e} is below this network's round-off floor {floor:.1e} "
+            "(long filaments; see socbjax.default_atol): use NewtonSolver(atol=socbjax.default_atol(network)).")
 
 
 def default_atol(network: Network, atol: float = 1e-12) -> float:

@@ -120,3 +120,9 @@ def test_default_atol():
     assert sj.default_atol(sj.cantilever(5, dim=2)) == 1e-12
     floor = sj.default_atol(sj.cantilever(10001, length=10.0, dim=2))
     assert 2e-11 < floor < 5e-11  # 16 ε · 10 µm / 1 nm
+
+
+def test_too_tight_tolerance_on_a_long_chain_names_the_round_off_floor():
+    net = sj.cantilever(n_nodes=3001, length=10.0, dim=2)
+    with pytest.raises(sj.ConvergenceError, match="round-off floor"):
+        sj.solve(net, {-1: [0.0, 0.02]}, solver=sj.NewtonSolver(atol=1e-14), linear_solver="sparse")
