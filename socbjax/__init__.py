@@ -6,107 +6,69 @@ the frame-free 3D form documented in ``docs/equations.md``.
 Units everywhere: length µm, force pN, time s, bending stiffness EI pN·µm², moments pN·µm.
 
 Importing socbjax enables JAX's float64 mode (``jax_enable_x64``): the physics is float64
-throughout and large-deflection Newton solves are not reliable in float32.
+throughout and large-deflection Newton solves are not reliable in float32.  Every public
+entry point is a function of traced values (``jax.jit``, ``jax.grad``, ``jax.jacfwd``,
+``jax.vmap``; see the README's "JAX transformations" table).
 """
 
 import jax as _jax
 
 _jax.config.update("jax_enable_x64", True)
 
+from ._adjoint import ImplicitAdjoint  # noqa: E402
 from ._afm import ForceCurve, load_curve, save_curve  # noqa: E402
+from ._buckling import buckling_load  # noqa: E402
 from ._builders import SUPPORTS, cantilever, column  # noqa: E402
-from ._compress import compress, probe_network, strand_perturbation  # noqa: E402
+from ._cache import enable_compilation_cache  # noqa: E402
+from ._compress import compress, probe_network  # noqa: E402
+from ._curve import FilamentCurve  # noqa: E402
 from ._dendritic import dendritic_outcrop, unit_dendritic_mesh  # noqa: E402
 from ._ensemble import EnsembleResult, compress_ensemble  # noqa: E402
-from ._continuation import ContinuationResult, ContinuationSettings, load_continuation  # noqa: E402
-from ._fit import FitResult, fit, fit_problem  # noqa: E402
-from ._fit_figure import plot_fit, save_fit_figure  # noqa: E402
-from ._implicit import implicit_root  # noqa: E402
-from ._models import FIT_MODELS, ColumnModel, FitModel, OutcropModel, UnitMeshModel, make_fit_model  # noqa: E402
-from ._parameters import NUISANCE_PARAMETERS, Parameter  # noqa: E402
+from ._equilibrium import Solution  # noqa: E402
 from ._figures import plot_end_forces, plot_force_curve, plot_snapshots, plot_strand_forces, save_figures  # noqa: E402
+from ._fit import FitResult, FitSettings, fit  # noqa: E402
+from ._fit_figure import plot_fit, save_fit_figure  # noqa: E402
+from ._fit_problem import FitProblem, fit_problem  # noqa: E402
 from ._io import load, load_checkpoint, save, save_checkpoint  # noqa: E402
 from ._jointed import JointedModel, JointedState  # noqa: E402
-from ._network import Network, make_network  # noqa: E402
-from ._newton import NewtonResult, NewtonSolver, Status  # noqa: E402
-from ._path import PathSettings  # noqa: E402
-from ._quadrature import coupling_matrix, gauss_legendre, quintic_coefficients  # noqa: E402
-from ._residual import SOCBModel, SOCBState, socb_residual  # noqa: E402
-from ._result import PHASES, CompressionResult, LimitPoint  # noqa: E402
-from ._solve import (  # noqa: E402
-    MODELS, ConvergenceError, Solution, buckling_load, default_atol, forces_array, make_model, prepare_jacobian_solver, solve,
+from ._linear import Bordered, ColouredSparseLU, DenseLU  # noqa: E402
+from ._models import FIT_MODELS, ColumnModel, FitModel, OutcropModel, UnitMeshModel, make_fit_model  # noqa: E402
+from ._network import Network, Topology, make_network  # noqa: E402
+from ._parameters import NUISANCE_PARAMETERS, Parameter  # noqa: E402
+from ._path import (  # noqa: E402
+    NaturalParameter, NoRecorder, PathProblem, PathSettings, PathState, PseudoArclength, StepRecorder, follow_path, start_path,
 )
-from ._linear import DenseJacobianSolver, SparseJacobianSolver  # noqa: E402
+from ._perturbation import strand_perturbation  # noqa: E402
+from ._protocol import Checkpoint  # noqa: E402
+from ._quadrature import coupling_matrix, gauss_legendre, quintic_coefficients  # noqa: E402
+from ._residual import Control, SOCBModel, SOCBState  # noqa: E402
+from ._result import PHASES, CompressionResult, LimitPoint  # noqa: E402
+from ._root import DampedNewton  # noqa: E402
+from ._solution import RESULTS, ConvergenceError  # noqa: E402
+from ._solve import MODELS, default_atol, make_model, solve  # noqa: E402
+from ._sparsity import linear_solver_for  # noqa: E402
 
-__version__ = "0.1.0"
+__version__ = "0.2.0"
 
 __all__ = [
     "__version__",
-    "Network",
-    "make_network",
-    "cantilever",
-    "column",
-    "compress",
-    "compress_ensemble",
-    "EnsembleResult",
-    "implicit_root",
-    "fit",
-    "fit_problem",
-    "FitResult",
-    "plot_fit",
-    "save_fit_figure",
-    "FitModel",
-    "ColumnModel",
-    "UnitMeshModel",
-    "OutcropModel",
-    "FIT_MODELS",
-    "make_fit_model",
-    "Parameter",
-    "NUISANCE_PARAMETERS",
-    "ForceCurve",
-    "load_curve",
+    # networks
+    "Network", "Topology", "make_network", "cantilever", "column", "SUPPORTS", "unit_dendritic_mesh",
+    "dendritic_outcrop", "probe_network", "strand_perturbation",
+    # solving
+    "solve", "Solution", "FilamentCurve", "buckling_load", "compress", "CompressionResult", "LimitPoint", "PHASES",
+    "compress_ensemble", "EnsembleResult", "PathSettings", "NaturalParameter", "PseudoArclength", "Checkpoint",
+    "follow_path", "start_path", "PathProblem", "PathState", "StepRecorder", "NoRecorder",
+    "RESULTS", "ConvergenceError", "default_atol",
+    # solver parts
+    "DampedNewton", "ImplicitAdjoint", "DenseLU", "ColouredSparseLU", "Bordered", "linear_solver_for", "make_model", "MODELS",
+    "SOCBModel", "SOCBState", "JointedModel", "JointedState", "Control",
+    "coupling_matrix", "quintic_coefficients", "gauss_legendre",
+    # fitting and data
+    "fit", "fit_problem", "FitProblem", "FitResult", "FitSettings", "FitModel", "ColumnModel", "UnitMeshModel",
+    "OutcropModel", "FIT_MODELS", "make_fit_model", "Parameter", "NUISANCE_PARAMETERS", "ForceCurve", "load_curve",
     "save_curve",
-    "unit_dendritic_mesh",
-    "dendritic_outcrop",
-    "probe_network",
-    "strand_perturbation",
-    "PathSettings",
-    "CompressionResult",
-    "LimitPoint",
-    "PHASES",
-    "save",
-    "save_figures",
-    "plot_force_curve",
-    "plot_snapshots",
-    "plot_end_forces",
-    "plot_strand_forces",
-    "load",
-    "save_checkpoint",
-    "load_checkpoint",
-    "SUPPORTS",
-    "solve",
-    "default_atol",
-    "prepare_jacobian_solver",
-    "DenseJacobianSolver",
-    "SparseJacobianSolver",
-    "buckling_load",
-    "Solution",
-    "Status",
-    "ConvergenceError",
-    "NewtonSolver",
-    "NewtonResult",
-    "ContinuationSettings",
-    "ContinuationResult",
-    "load_continuation",
-    "SOCBModel",
-    "SOCBState",
-    "JointedModel",
-    "JointedState",
-    "MODELS",
-    "make_model",
-    "forces_array",
-    "socb_residual",
-    "coupling_matrix",
-    "quintic_coefficients",
-    "gauss_legendre",
+    # files, figures, tooling
+    "save", "load", "save_checkpoint", "load_checkpoint", "save_figures", "plot_force_curve", "plot_snapshots",
+    "plot_end_forces", "plot_strand_forces", "plot_fit", "save_fit_figure", "enable_compilation_cache",
 ]

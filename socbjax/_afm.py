@@ -484,7 +484,7 @@ def save_curve(curve: ForceCurve, path: str | Path) -> Path:
     (``os.replace``).  ``load_curve(path, preprocess=False)`` gives back the same arrays
     (17 significant digits).  Returns ``path`` as a Path.
     """
-    from ._io import _atomic_path
+    from ._io import atomic_path
 
     path = Path(path)
     if path.suffix.lower() not in (*_NATIVE_SUFFIXES, ".txt"):
@@ -494,4 +494,4 @@ def save_curve(curve: ForceCurve, path: str | Path) -> Path:
     text = ("# socbjax ForceCurve: compression µm (positive = compressing), force pN, segment 0/1\n"
             f"# source: {source}\ncompression_um,force_pN,segment\n"
             + "".join(f"{c:.17g},{f:.17g},{s}\n" for c, f, s in rows))
-    return _atomic_path(path, lambda tmp: tmp.write_text(text, encoding="utf-8"))
+    return atomic_path(path, lambda tmp: tmp.write_text(text, encoding="utf-8"))

@@ -1,23 +1,30 @@
 """Builders of single-filament networks: :func:`cantilever` and :func:`column`.
 
-Arguments are validated here, in numpy, before anything is traced: every error names the
-offending argument and what would fix it.
+Arguments are validated here, before anything is traced: every error names the offending
+argument and what would fix it.  The continuous values (``length``, ``EI``, ``origin``) may
+be JAX tracers (inside ``jax.jit``, ``jax.grad``, ``jax.vmap``); ``n_nodes``, ``supports``,
+``dim`` and ``direction`` fix the topology and must be concrete.
 """
 
 from __future__ import annotations
 
 from collections.abc import Sequence
 
+import jax.numpy as jnp
 import numpy as np
 
-from ._network import Network, make_network
+from ._network import Network, is_traced, make_network
 
 __all__ = ["cantilever", "column", "SUPPORTS"]
 
 SUPPORTS = ("clamped", "pinned", "free")
 
 
-def _check_positive(name: str, value, unit: str) -> np.ndarray:
+def _check_positive(name: str, value, unit: str):
+    """``value`` as a float64 array; concrete values must be finite and positive (traced
+    values are kept as they are: they cannot be checked before tracing)."""
+    if is_traced(value):
+        return jnp.asarray(value, jnp.float64)
     arr = np.asarray(value, dtype=np.float64)
     if not np.all(np.isfinite(arr)):
         raise ValueError(f"{name} must be finite, got {value!r}")
@@ -50,29 +57,41 @@ def _check_direction(direction, dim: int) -> np.ndarray:
     return d / norm
 
 
-def _check_origin(origin, dim: int) -> np.ndarray:
+def _check_origin(origin, dim: int):
     if origin is None:
         return np.zeros(dim)
-    o = np.asarray(origin, dtype=np.float64).ravel()
+    if is_traced(origin):
+        o = jnp.asarray(origin, jnp.float64).ravel()
+    else:
+        o = np.asarray(origin, dtype=np.float64).ravel()
+        if not np.all(np.isfinite(o)):
+            raise ValueError(f"origin must be finite, got {origin!r}")
     if o.shape != (dim,):
         raise ValueError(f"origin must have {dim} components for dim={dim}, got shape {o.shape}")
-    if not np.all(np.isfinite(o)):
-        raise ValueError(f"origin must be finite, got {origin!r}")
     return o
 
 
 def _chain(n_nodes: int, length, EI, dim: int, direction, origin=None):
     n = _check_n_nodes(n_nodes)
-    L = float(_check_positive("length", length, "µm"))
+    L = _check_positive("length", length, "µm")
+    if np.ndim(L) != 0:
+        raise ValueError(f"length must be a scalar (µm), got shape {np.shape(L)}")
     EI_arr = _check_positive("EI", EI, "pN·µm²")
     if EI_arr.ndim > 1 or (EI_arr.ndim == 1 and EI_arr.shape[0] != n - 1):
         raise ValueError(f"EI must be a scalar or have one value per segment ({n - 1}), got shape {EI_arr.shape}")
-    axis = _check_direction(direction, dim)
-    s = np.linspace(0.0, L, n)
+    axis = _check_direction(_concrete("direction", direction), dim)
+    xp = jnp if is_traced(L, origin) else np
+    s = xp.linspace(0.0, 1.0, n) * L
     positions = _check_origin(origin, dim)[None, :] + s[:, None] * axis[None, :]
     tangents = np.tile(axis, (n, 1))
     segments = np.stack([np.arange(n - 1), np.arange(1, n)], axis=1)
     return n, L, EI_arr, axis, positions, tangents, segments
+
+
+def _concrete(name: str, value):
+    if is_traced(value):
+        raise TypeError(f"{name} sets the supports (topology) and must be concrete, not a traced JAX value")
+    return value
 
 
 def cantilever(
@@ -143,7 +162,7 @@ def column(
         positions,
         tangents,
         segments,
-        np.full(n - 1, L / (n - 1)),
+        (jnp if is_traced(L) else np).full(n - 1, 1.0) * (L / (n - 1)),
         EI_arr,
         fixed_directions=fixed,
         clamped=clamped,

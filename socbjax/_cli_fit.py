@@ -89,8 +89,9 @@ def run_fit(args) -> int:
           f"force up to {curve.force.max():.4g} pN; model {args.model}, free {args.free}", file=sys.stderr)
     result = sj.fit(
         curve, args.model, free=tuple(n.strip() for n in args.free.split(",") if n.strip()),
-        fixed=_pairs(args.fixed, "--fixed"), initial=_pairs(args.initial, "--initial"), branch=args.branch,
-        optimizer=args.optimizer, max_iterations=args.max_iterations, max_points=args.max_points,
+        fixed=_pairs(args.fixed, "--fixed"), initial=_pairs(args.initial, "--initial"),
+        settings=sj.FitSettings(branch=args.branch, optimizer=args.optimizer, max_iterations=args.max_iterations,
+                                max_points=args.max_points),
         model_options=_model_options(args.model_option), progress=not args.quiet,
     )
     figure = out.with_suffix(".png")

@@ -11,9 +11,10 @@ from pathlib import Path
 import numpy as np
 
 from . import __version__
+from ._buckling import buckling_load
 from ._builders import cantilever, column
-from ._reference import elastica_cantilever
-from ._solve import buckling_load, solve
+from ._solve import solve
+from .testing import elastica_cantilever
 
 __all__ = ["run_demo"]
 
@@ -40,7 +41,7 @@ def _cantilever_rows(load: float, exact: np.ndarray, quick: bool):
         d = np.asarray(sol.positions[-1]) - [1.0, 0.0]
         err = float(np.linalg.norm(d - exact) / np.linalg.norm(exact))
         rows.append(dict(model=model, nodes=n, dX=float(-d[0]), dY=float(d[1]), rel_error=err, seconds=time.perf_counter() - t0))
-        solutions[(model, n)] = (sol, net)
+        solutions[(model, n)] = sol
         _say(f"  {model:8s} {n:3d} nodes  ΔX/L={-d[0]:.6f}  ΔY/L={d[1]:.6f}  rel. error {err:.2e}")
     return rows, solutions
 
@@ -52,7 +53,7 @@ def _buckling_rows(quick: bool):
         supports = tuple(name.split("-"))
         row = dict(supports=name, exact=exact)
         for model, n in counts if not quick else counts[:3]:
-            P = buckling_load(column(n, supports=supports, dim=2), model=model)
+            P = float(buckling_load(column(n, supports=supports, dim=2), model=model))
             row[f"{model}_{n}"] = P
             row[f"{model}_{n}_error"] = abs(P - exact) / exact
         rows.append(row)
@@ -73,29 +74,33 @@ def _post_buckling(quick: bool):
         e = np.asarray(ref.tip_position) - [1.0, 0.0]
         err = float(np.linalg.norm(d - e) / np.linalg.norm(e))
         rows.append(dict(load_over_critical=ratio, tip_deflection=float(d[1]), exact=float(e[1]), rel_error=err))
-        shapes.append((ratio, sol, net, np.asarray(ref.positions)))
+        shapes.append((ratio, sol, np.asarray(ref.positions)))
         _say(f"  P/Pcr={ratio:4.2f}  tip deflection {d[1]:.6f}  elastica {e[1]:.6f}  rel. error {err:.1e}")
     return rows, shapes
 
 
 def _figure(path: Path, exact_profile, solutions, cant_rows, shapes):
-    import matplotlib
     import matplotlib.ticker
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+    from matplotlib.figure import Figure
 
-    from ._plot import plot_shapes, plt
+    from ._io import atomic_path
+    from ._plot import plot_shapes
 
-    fig, axes = plt.subplots(1, 3, figsize=(15, 4.8))
+    fig = Figure(figsize=(15, 4.8), layout="constrained")
+    FigureCanvasAgg(fig)
+    axes = fig.subplots(1, 3)
     ax = axes[0]
     ax.plot(exact_profile[:, 0], exact_profile[:, 1], "k-", lw=4, alpha=0.25, label="exact elastica")
-    items = [("SOCB, 2 nodes", *solutions[("socb", 2)], dict(color="C0", lw=1.5))]
-    items.append(("jointed, 5 nodes", *solutions[("jointed", 5)], dict(color="C3", lw=1.0, ls="--")))
+    items = [("SOCB, 2 nodes", solutions[("socb", 2)], dict(color="C0", lw=1.5))]
+    items.append(("jointed, 5 nodes", solutions[("jointed", 5)], dict(color="C3", lw=1.0, ls="--")))
     plot_shapes(ax, items)
     ax.set_title("Cantilever, PL²/EI = 2 (Fig. 4A)")
     ax.legend(loc="upper left")
     ax = axes[1]
-    for k, (ratio, sol, net, ref) in enumerate(shapes):
+    for k, (ratio, sol, ref) in enumerate(shapes):
         ax.plot(ref[:, 0], ref[:, 1], "k-", lw=4, alpha=0.2)
-        plot_shapes(ax, [(f"P/Pcr = {ratio}", sol, net, dict(color=f"C{k}"))])
+        plot_shapes(ax, [(f"P/Pcr = {ratio}", sol, dict(color=f"C{k}"))])
     ax.set_title("Buckled clamped–free column, SOCB 5 nodes\n(grey: exact elastica)")
     ax.legend(loc="lower left", fontsize=8)
     ax = axes[2]
@@ -110,11 +115,7 @@ def _figure(path: Path, exact_profile, solutions, cant_rows, shapes):
     ax.set_title("Error vs nodes, PL²/EI = 2")
     ax.grid(True, which="both", alpha=0.3)
     ax.legend()
-    fig.tight_layout()
-    tmp = path.with_suffix(".tmp.png")
-    fig.savefig(tmp, dpi=120)
-    plt.close(fig)
-    os.replace(tmp, path)
+    atomic_path(path, lambda tmp: fig.savefig(tmp, format="png", dpi=120))
 
 
 def run_demo(out: str | os.PathLike = "socbjax-demo", *, quick: bool = False) -> dict:
@@ -133,9 +134,9 @@ def run_demo(out: str | os.PathLike = "socbjax-demo", *, quick: bool = False) ->
     _say("[3/3] Post-buckling of the clamped–free column (lateral imperfection 1e-3 P)")
     post_rows, shapes = _post_buckling(quick)
     report = dict(version=__version__, cantilever=cant_rows, buckling=buck_rows, post_buckling=post_rows)
-    tmp = out / "demo.json.tmp"
-    tmp.write_text(json.dumps(report, indent=2))
-    os.replace(tmp, out / "demo.json")
+    from ._io import atomic_path
+
+    atomic_path(out / "demo.json", lambda tmp: tmp.write_text(json.dumps(report, indent=2)))
     _figure(out / "demo.png", np.asarray(exact.positions), solutions, cant_rows, shapes)
     _say(f"wrote {out / 'demo.json'} and {out / 'demo.png'} in {time.perf_counter() - t0:.1f} s")
     return report

@@ -32,31 +32,51 @@ from __future__ import annotations
 
 import numbers
 
-import equinox as eqx
 import jax.numpy as jnp
 import numpy as np
 
-from ._network import Network, make_network
+from ._network import Network, is_traced, make_network
+from ._perturbation import strand_perturbation
 
 __all__ = ["unit_dendritic_mesh", "dendritic_outcrop"]
 
 
 def _positive(name, value, unit):
+    """A concrete positive float; traced values are refused (they would fix the topology)."""
+    if is_traced(value):
+        raise TypeError(f"{name} fixes the network's topology (number and placement of segments) and must be a "
+                        "concrete number, not a traced JAX value; only EI and perturbation may be traced here")
     if isinstance(value, bool) or not isinstance(value, numbers.Real) or not np.isfinite(value) or value <= 0:
         raise ValueError(f"{name} must be a positive number ({unit}), got {value!r}")
     return float(value)
 
 
-def _angle(branch_angle):
+def _value(name, value, unit, *, allow_zero=False):
+    """A continuous value that may be traced (EI, perturbation): concrete ones are checked."""
+    if is_traced(value):
+        return jnp.asarray(value, jnp.float64)
+    if isinstance(value, bool) or not isinstance(value, numbers.Real) or not np.isfinite(value) or \
+            (value < 0 if allow_zero else value <= 0):
+        kind = "non-negative" if allow_zero else "positive"
+        raise ValueError(f"{name} must be a {kind} number ({unit}), got {value!r}")
+    return float(value)
+
+
+def _angle(branch_angle, traced_ok=False):
+    if is_traced(branch_angle):
+        if not traced_ok:
+            raise TypeError("branch_angle shapes the random growth (which strands reach the surface) and must be "
+                            "concrete here; fit it with socbjax.UnitMeshModel")
+        return jnp.deg2rad(jnp.asarray(branch_angle, jnp.float64))
     if isinstance(branch_angle, bool) or not isinstance(branch_angle, numbers.Real) or not 0 < branch_angle < 180:
         raise ValueError(f"branch_angle must be in (0, 180) degrees, got {branch_angle!r}")
     return np.deg2rad(float(branch_angle))
 
 
 def _dim(dim):
-    if dim not in (2, 3):
-        raise ValueError(f"dim must be 2 or 3, got {dim!r}")
-    return dim
+    if isinstance(dim, bool) or not isinstance(dim, numbers.Integral) or dim not in (2, 3):
+        raise ValueError(f"dim must be 2 or 3 (an integer), got {dim!r}")
+    return int(dim)
 
 
 class _Grower:
@@ -81,22 +101,24 @@ class _Grower:
         return tip
 
     def build(self, EI, perturbation, seed) -> Network:
-        from ._perturbation import strand_perturbation
-
         n, d = len(self.pos), self.dim
         fixed = [np.zeros((0, d)) for _ in range(n)]
         for i in [0, *self.pinned]:
             fixed[i] = np.eye(d)
         clamped = np.zeros(n, bool)
         clamped[0] = True
-        net = make_network(
+        return _finish(make_network(
             np.array(self.pos), np.array(self.tan), np.array(self.segs), np.array(self.lengths), EI,
             fixed_directions=fixed, clamped=clamped, attach=self.attach or None, probe=[0],
             probe_direction=np.eye(d)[-1], strand=np.array(self.strand),
-        )
-        if perturbation:
-            net = eqx.tree_at(lambda m: m.loads, net, jnp.asarray(strand_perturbation(net, perturbation, seed=seed)))
-        return net
+        ), perturbation, seed)
+
+
+def _finish(net: Network, perturbation, seed) -> Network:
+    """The network with the lateral perturbation loads (pN, possibly traced) applied."""
+    if is_traced(perturbation) or perturbation:
+        return net.replace(loads=strand_perturbation(net, perturbation, seed=seed))
+    return net
 
 
 def _pieces(length, segment_length):
@@ -139,6 +161,7 @@ def unit_dendritic_mesh(
     segment_length: float = 0.25,
     dim: int = 3,
     perturbation: float = 0.0,
+    daughter_segments: int | None = None,
 ) -> Network:
     """Paper Fig. 6a: a mother from the probe-bound nucleation point (node 0, clamped) along
     +z to the surface at z = ``mother_length``, hinged there, and a daughter from the
@@ -152,33 +175,61 @@ def unit_dendritic_mesh(
     ``segment_length`` (µm) is the node spacing (the middle must fall on a node).
     ``perturbation`` (pN): lateral force on each strand's middle node (0: none;
     :func:`socbjax.compress` then applies its default).  Deterministic (no randomness).
+    ``daughter_segments``: split the daughter into this many equal segments (default: pieces
+    of ``segment_length``).  ``EI``, ``perturbation`` and ``branch_angle`` may be traced JAX
+    values (``branch_angle`` then needs ``daughter_segments``: the count is topology).
     """
     dim = _dim(dim)
-    EI = _positive("EI", EI, "pN·µm²")
+    EI = _value("EI", EI, "pN·µm²")
+    perturbation = _value("perturbation", perturbation, "pN", allow_zero=True)
     L, ell = (_positive(n, v, "µm") for n, v in (("mother_length", mother_length), ("segment_length", segment_length)))
-    phi = _angle(branch_angle)
-    reach = (0.5 * L) / np.cos(phi) if np.cos(phi) > 1e-12 else np.inf
-    Ld = reach if daughter_length is None else _positive("daughter_length", daughter_length, "µm")
-    if not np.isfinite(Ld):
-        raise ValueError("a daughter at branch_angle >= 90° never reaches the surface; give daughter_length")
+    phi = _angle(branch_angle, traced_ok=True)
     half = 0.5 * L / ell
     if abs(half - round(half)) > 1e-9 or round(half) < 1:
         raise ValueError(f"segment_length must divide half the mother ({0.5 * L} µm) into whole segments, got {ell}")
+    pieces, hinged = _daughter_pieces(phi, L, ell, daughter_length, daughter_segments)
+    m, k = 2 * round(half), len(pieces)
     axis, side = np.eye(dim)[-1], np.eye(dim)[0]
-    g = _Grower(dim)
-    base = g.node(np.zeros(dim), axis)
-    middle = g.grow(base, axis, [ell] * round(half), strand=0)
-    top = g.grow(middle, axis, [ell] * round(half), strand=0)
-    g.pinned.append(top)
-    t_d = np.cos(phi) * axis + np.sin(phi) * side
-    length = min(Ld, reach)
-    daughter = g.node(g.pos[middle], t_d)
-    g.attach.append((middle, daughter))
-    tip = g.grow(daughter, t_d, _pieces(length, ell), strand=1)
-    if Ld >= reach - 1e-12:
-        g.pos[tip][-1] = L  # exactly on the surface
-        g.pinned.append(tip)
-    return g.build(EI, perturbation, 0)
+    xp = jnp if is_traced(phi, pieces) else np
+    t_d = xp.cos(phi) * axis + xp.sin(phi) * side
+    s = xp.concatenate([xp.zeros(1), xp.cumsum(xp.asarray(pieces))])
+    daughter = 0.5 * L * axis[None, :] + s[:, None] * t_d[None, :]  # base at the mother's middle node
+    if hinged:  # the tip exactly on the surface
+        daughter = xp.concatenate([daughter[:-1], xp.concatenate([daughter[-1, :-1], xp.full(1, L)])[None]])
+    positions = xp.concatenate([xp.asarray(np.arange(m + 1)[:, None] * ell * axis[None, :]), daughter])
+    tangents = xp.concatenate([xp.asarray(np.tile(axis, (m + 1, 1))), xp.broadcast_to(t_d, (k + 1, dim))])
+    segments = np.concatenate([np.stack([np.arange(m), np.arange(1, m + 1)], 1),
+                               np.stack([np.arange(m + 1, m + 1 + k), np.arange(m + 2, m + 2 + k)], 1)])
+    fixed = [np.zeros((0, dim)) for _ in range(m + k + 2)]
+    for i in [0, m] + ([m + 1 + k] if hinged else []):
+        fixed[i] = np.eye(dim)
+    clamped = np.zeros(m + k + 2, bool)
+    clamped[0] = True
+    net = make_network(positions, tangents, segments, xp.concatenate([xp.full(m, ell), xp.asarray(pieces)]), EI,
+                       fixed_directions=fixed, clamped=clamped, attach=[(m // 2, m + 1)], probe=[0],
+                       probe_direction=axis, strand=np.repeat([0, 1], [m, k]))
+    return _finish(net, perturbation, 0)
+
+
+def _daughter_pieces(phi, L, ell, daughter_length, daughter_segments):
+    """(segment lengths of the daughter, whether it is hinged on the surface)."""
+    if daughter_segments is not None and (isinstance(daughter_segments, bool)
+                                          or not isinstance(daughter_segments, numbers.Integral) or daughter_segments < 1):
+        raise ValueError(f"daughter_segments must be a positive integer, got {daughter_segments!r}")
+    if is_traced(phi):
+        if daughter_segments is None or daughter_length is not None:
+            raise TypeError("a traced branch_angle needs daughter_segments=<int> and daughter_length=None: the daughter "
+                            "then grows to the surface in that many segments (the count is topology)")
+        return jnp.full(daughter_segments, 0.5 * L / jnp.cos(phi) / daughter_segments), True
+    reach = 0.5 * L / np.cos(phi) if np.cos(phi) > 1e-12 else np.inf
+    if daughter_length is None:
+        if not np.isfinite(reach):
+            raise ValueError("a daughter at branch_angle >= 90° never reaches the surface; give daughter_length")
+        length, hinged = reach, True
+    else:
+        Ld = _positive("daughter_length", daughter_length, "µm")
+        length, hinged = min(Ld, reach), bool(Ld >= reach - 1e-12)
+    return ([length / daughter_segments] * daughter_segments if daughter_segments else _pieces(length, ell)), hinged
 
 
 def _check_outcrop(generations, gap, growth, segment_length, EI, seed, max_redraws, perturbation):
@@ -191,9 +242,7 @@ def _check_outcrop(generations, gap, growth, segment_length, EI, seed, max_redra
     gap, growth, ell = (_positive(n, v, "µm") for n, v in (("gap", gap), ("growth", growth), ("segment_length", segment_length)))
     if ell > growth:
         raise ValueError(f"segment_length ({ell} µm) must not exceed growth ({growth} µm) per generation")
-    if not np.isfinite(perturbation) or perturbation < 0:
-        raise ValueError(f"perturbation must be a non-negative force (pN), got {perturbation!r}")
-    return gap, growth, ell, _positive("EI", EI, "pN·µm²")
+    return gap, growth, ell, _value("EI", EI, "pN·µm²"), _value("perturbation", perturbation, "pN", allow_zero=True)
 
 
 def dendritic_outcrop(
@@ -220,7 +269,8 @@ def dendritic_outcrop(
     Strand ends on the surface are the pinned nodes other than the probe node 0.
     """
     dim = _dim(dim)
-    gap, growth, ell, EI = _check_outcrop(generations, gap, growth, segment_length, EI, seed, max_redraws, perturbation)
+    gap, growth, ell, EI, perturbation = _check_outcrop(generations, gap, growth, segment_length, EI, seed, max_redraws,
+                                                        perturbation)
     phi = _angle(branch_angle)
     rng = np.random.default_rng(seed)
     axis = np.eye(dim)[-1]

@@ -1,21 +1,19 @@
 """Ensembles of compressions: one compiled, vmapped continuation for a batch of networks of
-identical structure, optionally sharded across devices: :func:`compress_ensemble`.
+identical topology, optionally sharded across devices: :func:`compress_ensemble`.
 
-The members share everything that fixes the compiled program and the Jacobian's sparsity
-(:func:`socbjax._sparsity.structure_key`: dimension, topology, supports, probe, array
-shapes); the values of ``positions``, ``tangents``, ``lengths``, ``EI`` and ``loads`` (and the
-perturbation) may differ — one outcrop under many EI values, many imperfection patterns or
-magnitudes, or geometric variants of one topology.
+The members share their :class:`socbjax.Topology` (which fixes the compiled program and the
+Jacobian's sparsity); the values of ``positions``, ``tangents``, ``lengths``, ``EI``,
+``loads`` and ``couples`` (and the perturbation) may differ — one outcrop under many EI
+values, many imperfection patterns or magnitudes, or geometric variants of one topology.
 
 Each phase of the :func:`socbjax.compress` protocol (settle, loading, unloading) is one
-compiled call: ``jax.vmap`` of the phase's ``path_start`` + ``path_run`` (a
-``lax.while_loop``) over the batch axis, and the three phases share one compiled program.
-The structure enters once, unbatched; the differentiable fields, loads and control ends are
-stacked [B, ...] (so new values never recompile).  The vmapped loop runs until its
-slowest member is done; finished members idle (their updates are masked), and every Newton
-iteration factors all B Jacobians (dense: one batched LU; sparse: B sequential SuperLU
-callbacks).  Between phases the host reads the step records and builds the next phase (the
-per-member settled displacement u₀ sets the loading endpoints).
+compiled call: ``jax.vmap`` of :func:`socbjax._path.follow_path` over the batch axis (the
+members are one stacked :class:`Network` pytree), and the three phases share one compiled
+program.  The vmapped loop runs until its slowest member is done; finished members idle
+(their updates are masked), and every Newton iteration factors all B Jacobians (dense: one
+batched LU; sparse: one SuperLU callback per member).  Between phases the host reads the step
+records and builds the next phase (the per-member settled displacement u₀ sets the loading
+endpoints).
 
 With ``devices`` the batch axis is split over a 1-D ``jax.sharding.Mesh`` (axis "batch") by
 ``jax.shard_map``: each device runs its own vmapped while-loops on B/D members, with no
@@ -24,34 +22,34 @@ cross-device communication inside the loop.  See ``docs/scaling.md``.
 
 from __future__ import annotations
 
-import dataclasses
 import functools
 import sys
 from collections.abc import Sequence
 
 import equinox as eqx
+import equinox.internal as eqxi
 import jax
 import jax.numpy as jnp
 import numpy as np
+from jax.flatten_util import ravel_pytree
 from jax.sharding import Mesh, NamedSharding
 from jax.sharding import PartitionSpec as P
 
-from ._compress import _check_inputs, _concat, _loads, _package, _Protocol, _run, _start, probe_network, traced_settings
-from ._linear import DenseJacobianSolver, _lu_sign
-from ._network import DIFFERENTIABLE_FIELDS, Network
-from ._newton import Status
-from ._path import PathSettings, path_weights
+from ._compress import check_compress_inputs, package_path, applied_loads, compress_settings
+from ._linear import DenseLU, lu_sign
+from ._network import Network
+from ._path import StepRecorder, follow_path, start_path
+from ._protocol import UNLOAD_MARGIN, phase_problem, settled_displacement
+from ._quadrature import get_quadrature
+from ._residual import SOCBModel
 from ._result import CompressionResult
-from ._solve import ConvergenceError
-from ._sparsity import structure_key
+from ._solution import RESULTS, ConvergenceError, result_from_name, result_message, result_name
+from ._sparsity import linear_solver_for
 
 __all__ = ["EnsembleResult", "compress_ensemble"]
 
-_RUNNING = -1
 
-
-@dataclasses.dataclass(frozen=True, eq=False)
-class EnsembleResult:
+class EnsembleResult(eqx.Module):
     """The compressions of an ensemble; see :func:`compress_ensemble`.
 
     displacement, force : [B, M] probe displacement (µm) and probe force along the probe
@@ -59,28 +57,34 @@ class EnsembleResult:
         loading, unloading), padded with NaN after the member's ``n_steps[b]`` rows.
     phase : [B, M] int8, 0 settle, 1 loading, 2 unloading, −1 padding.
     n_steps : [B] recorded steps per member.
-    status : [B] :class:`socbjax.Status` code per member (CONVERGED: every phase completed).
-    results : the B members as :class:`CompressionResult` (unpadded; also ``member(i)``).
-    devices : the devices that held the batch (the output shards of the last phase).
+    results : the B members as :class:`CompressionResult` (unpadded; also ``member(i)``);
+        ``member(i).result`` is member i's :class:`socbjax.RESULTS` item.
     attempts, newton_iterations : [B, phases] attempted steps (accepted and rejected) and
-        Newton iterations of each member per phase (0 for phases not reached): the work a
-        member needed; the batch runs each phase for max over members of it.
+        Newton iterations of each member per phase (0 for phases not reached).
+    devices : the devices that held the batch.
     """
 
     displacement: np.ndarray
     force: np.ndarray
     phase: np.ndarray
     n_steps: np.ndarray
-    status: np.ndarray
-    results: list[CompressionResult]
-    devices: tuple[str, ...]
+    results: tuple
     attempts: np.ndarray
     newton_iterations: np.ndarray
+    devices: tuple = eqx.field(static=True, default=())
 
     @property
     def completed(self) -> np.ndarray:
         """[B] bool: member completed every phase."""
-        return self.status == Status.CONVERGED
+        return np.array([r.completed for r in self.results])
+
+    @property
+    def result(self):
+        """The first failure among the members (``RESULTS.successful`` if none failed)."""
+        for r in self.results:
+            if not r.completed:
+                return r.result
+        return RESULTS.successful
 
     def member(self, i: int) -> CompressionResult:
         return self.results[i]
@@ -93,46 +97,34 @@ class EnsembleResult:
                 f"{int(self.n_steps.max())} steps max, devices {len(self.devices)})")
 
 
-class _Member(_Protocol):
-    """One member's protocol (problems, phase ends, records); the batch shares one linear solver."""
-
-    def _linear_solver(self, kind):
-        return None
-
-
 # --------------------------------------------------------------------------- validation
-def _structure_difference(a: Network, b: Network) -> str:
-    """What differs in structure between ``a`` and ``b`` (see :func:`structure_key`)."""
-    if a.dim != b.dim:
-        return f"dim ({a.dim} vs {b.dim})"
-    for name in sorted(vars(a)):
-        x, y = np.asarray(getattr(a, name)), np.asarray(getattr(b, name))
-        if x.shape != y.shape:
-            return f"the shape of {name} ({x.shape} vs {y.shape})"
-        if name not in DIFFERENTIABLE_FIELDS and x.ndim and not np.array_equal(x != 0, y != 0):
-            return f"{name}"
-    return "the structure"
-
-
 def _check_members(networks) -> list[Network]:
     if isinstance(networks, Network) or not isinstance(networks, Sequence):
-        raise TypeError("networks must be a sequence (list or tuple) of socbjax Networks of identical structure")
+        raise TypeError("networks must be a sequence (list or tuple) of socbjax Networks of identical topology")
     if not len(networks):
         raise ValueError("networks is empty: an ensemble needs at least one member")
     for i, net in enumerate(networks):
         if not isinstance(net, Network):
             raise TypeError(f"member {i} of networks is a {type(net).__name__}, not a socbjax Network")
-    nets = [probe_network(net) for net in networks]
-    key = structure_key(nets[0])
-    for i, net in enumerate(nets[1:], 1):
-        if structure_key(net) != key:
+    for i, net in enumerate(networks[1:], 1):
+        if net.topology != networks[0].topology:
             raise ValueError(
-                f"member {i} differs from member 0 in {_structure_difference(nets[0], net)}: the members of an "
-                "ensemble must share dimension, topology (segments, junctions, strands), supports, probe and array "
-                "shapes; only the values of positions, tangents, lengths, EI and loads may differ "
-                "(pad or group networks of different topology into separate ensembles)"
+                f"member {i} differs from member 0 in its topology ({_difference(networks[0], net)}): the members of an "
+                "ensemble must share dimension, segments, junctions, strands, supports and probe; only the values of "
+                "positions, tangents, lengths, EI, loads and couples may differ (group networks of different topology "
+                "into separate ensembles)"
             )
-    return nets
+    return list(networks)
+
+
+def _difference(a: Network, b: Network) -> str:
+    if a.dim != b.dim:
+        return f"dim {a.dim} vs {b.dim}"
+    for name in ("segments", "attach", "strand", "clamped", "probe", "position_projector", "probe_direction"):
+        x, y = getattr(a, name), getattr(b, name)
+        if x.shape != y.shape or not np.array_equal(x, y):
+            return name
+    return "structure"
 
 
 def _member_perturbations(perturbation, B: int) -> list:
@@ -140,8 +132,7 @@ def _member_perturbations(perturbation, B: int) -> list:
         return [perturbation] * B
     values = list(np.asarray(perturbation, dtype=float).ravel()) if np.ndim(perturbation) == 1 else None
     if values is None or len(values) != B:
-        raise ValueError(f"perturbation must be None, one force (pN) or one per member ({B}), "
-                         f"got shape {np.shape(perturbation)}")
+        raise ValueError(f"perturbation must be None, one force (pN) or one per member ({B}), got shape {np.shape(perturbation)}")
     return values
 
 
@@ -162,75 +153,53 @@ def _resolve_devices(devices):
 
 # --------------------------------------------------------------------- batched phases
 @jax.custom_batching.custom_vmap
-def _mapped_lu_solve(J, rhs):
+def _mapped_lu(J):
     lu, piv = jax.scipy.linalg.lu_factor(J)
-    return jax.scipy.linalg.lu_solve((lu, piv), rhs.astype(lu.dtype)), _lu_sign(lu, piv)
+    return lu, piv
 
 
-@_mapped_lu_solve.def_vmap
-def _mapped_lu_solve_vmap(axis_size, in_batched, J, rhs):
-    J, rhs = (a if b else jnp.broadcast_to(a, (axis_size, *a.shape)) for a, b in zip((J, rhs), in_batched))
-    return jax.lax.map(lambda a: _mapped_lu_solve(*a), (J, rhs)), (True, True)
+@_mapped_lu.def_vmap
+def _mapped_lu_vmap(axis_size, in_batched, J):
+    J = J if in_batched[0] else jnp.broadcast_to(J, (axis_size, *J.shape))
+    return jax.lax.map(_mapped_lu, J), (True, True)
 
 
-class _MappedDenseSolver(DenseJacobianSolver):
-    """:class:`DenseJacobianSolver` whose LU runs one matrix at a time under ``vmap``.
+class MappedDenseLU(DenseLU):
+    """:class:`DenseLU` whose factorisation runs one matrix at a time under ``vmap``.
 
-    jaxlib's batched CPU LU (``lapack_dgetrf_ffi``) splits the batch over XLA's intra-op
-    thread pool and waits inside a pool worker; when several host devices (from
-    ``--xla_force_host_platform_device_count``) each run such a batched LU, all workers can
-    end up waiting and the program deadlocks (observed with 2 host devices on 2 cores).
-    Sharded CPU ensembles therefore factor their members in a ``lax.map`` loop (the same
-    LAPACK call per matrix, so the same numbers); the Jacobians stay batched."""
+    jaxlib's batched CPU LU splits the batch over XLA's intra-op thread pool and waits inside
+    a pool worker; when several host devices (``--xla_force_host_platform_device_count``)
+    each run such a batched LU, all workers can end up waiting and the program deadlocks
+    (observed with 2 host devices on 2 cores).  Sharded CPU ensembles therefore factor their
+    members in a ``lax.map`` loop (the same LAPACK call per matrix, so the same numbers)."""
 
-    def solve(self, fn, x, rhs, *, transpose: bool = False):
-        if transpose:
-            return super().solve(fn, x, rhs, transpose=True)
-        return _mapped_lu_solve(jax.jacfwd(fn)(x), rhs)
+    def from_products(self, products, n):
+        lu, piv = _mapped_lu(products.T)
+        return lu, piv, lu_sign(lu, piv), eqxi.Static(False)
 
 
-def _split(problems):
-    """Stack the members' :class:`_Problem` s: (batched, stacked [B, ...]: the network's
-    differentiable fields, loads, control ends and any other leaf that differs; shared: the
-    structure, once); either tree has None where the other holds.  So the three phases, and
-    new values of any differentiable field, reuse one compiled program."""
-    def varies(*xs):
-        x0 = np.asarray(xs[0])
-        return any(x is not xs[0] and not np.array_equal(np.asarray(x), x0) for x in xs[1:])
+def _phase_body(models, index, u0s, u_max, xs, states, live, settings, chunk, *, inner, recorder):
+    def one(model, u0, x, state, alive):
+        if state is None:
+            state = eqx.tree_at(lambda s: s.done, start_path(x, 0.0, settings, recorder), ~alive)
+        problem = phase_problem(model, index, u0, u_max, settings)
+        return follow_path(problem, state, settings, inner, recorder, stop_after=chunk)
 
-    mask = jax.tree_util.tree_map(varies, *problems)
-    values = lambda p: (p.loads, p.control0, p.control1, *(getattr(p.model.network, f) for f in DIFFERENTIABLE_FIELDS))
-    mask = eqx.tree_at(values, mask, (True,) * (3 + len(DIFFERENTIABLE_FIELDS)))
-    trees = problems
-    batched = jax.tree_util.tree_map(lambda m, *xs: jnp.stack([jnp.asarray(x) for x in xs]) if m else None, mask, *trees)
-    shared = jax.tree_util.tree_map(lambda m, x: None if m else x, mask, trees[0])
-    return batched, shared
-
-
-def _phase_body(batched, shared, xc, weights, scale, chunk, settings, *, linsolver, start):
-    def one(b, xc, w, s):
-        problem = eqx.combine(b, shared)
-        carry = _start(problem, xc, w, linsolver, settings) if start else xc
-        return _run(problem, carry, w, s, linsolver, settings, chunk)
-
-    return jax.vmap(one)(batched, xc, weights, scale)
+    return jax.vmap(one)(models, u0s, xs, states, live)
 
 
 @eqx.filter_jit
-def _phase(batched, shared, xc, weights, scale, chunk, settings, linsolver, start, mesh):
-    """One compiled call: the vmapped phase (start + while-loop) over the batch, each device
-    running its own shard of the batch axis when ``mesh`` is given."""
-    body = functools.partial(_phase_body, linsolver=linsolver, start=start)
-    args = (batched, shared, xc, weights, scale, chunk, settings)
+def _phase(models, index, u0s, u_max, xs, states, live, settings, chunk, inner, recorder, mesh):
+    body = functools.partial(_phase_body, inner=inner, recorder=recorder)
+    args = (models, index, u0s, u_max, xs, states, live, settings, chunk)
     if mesh is None:
         return body(*args)
-    specs = (P("batch"), P(), P("batch"), P("batch"), P("batch"), P(), P())
+    specs = (P("batch"), P(), P("batch"), P(), P("batch"), P("batch"), P("batch"), P(), P())
     return jax.shard_map(body, mesh=mesh, in_specs=specs, out_specs=P("batch"), check_vma=False)(*args)
 
 
 def _place(tree, mesh, spec):
-    """Global arrays laid out by ``spec`` over ``mesh`` (also across processes: each process
-    supplies its own shards from the full host value)."""
+    """Global arrays laid out by ``spec`` over ``mesh`` (each process supplies its shards)."""
     if mesh is None:
         return tree
 
@@ -251,176 +220,156 @@ def _to_host(a) -> np.ndarray:
     return np.asarray(multihost_utils.process_allgather(a, tiled=True))
 
 
-def _pad(rows: list, size: int) -> list:
-    return rows + [rows[-1]] * (size - len(rows))
+def _pad(items: list, size: int) -> list:
+    return items + [items[0]] * (size - len(items))
 
 
-def _run_batch(plans, weights, runner, progress, name):
-    """Run one phase for all members (``plans``: per member (problem, p-scale, x start, ends));
-    returns the host-side per-member carries."""
-    B, mesh = len(plans), runner["mesh"]
-    size = B if mesh is None else -(-B // mesh.size) * mesh.size  # pad to a multiple of the devices
-    batched, shared = _split(_pad([p[0] for p in plans], size))
-    xs = jnp.stack(_pad([jnp.asarray(p[2]) for p in plans], size))
-    scales = jnp.asarray(_pad([float(p[1]) for p in plans], size))
-    w = jnp.stack(_pad(weights, size))
-    batched, xs, scales, w = _place((batched, xs, scales, w), mesh, P("batch"))
-    shared, settings, chunk = _place((shared, traced_settings(runner["settings"]), jnp.asarray(runner["chunk"])), mesh, P())
-    args = dict(linsolver=runner["linsolver"], mesh=mesh)
-    carry = _phase(batched, shared, xs, w, scales, chunk, settings, start=True, **args)
-    while True:
-        status = _to_host(carry["status"])[:B]
-        if progress:
-            done = int(np.sum(status != _RUNNING))
-            sys.stderr.write(f"\r{name:>9s}: {done}/{B} members done, steps {int(_to_host(carry['steps']).max()):5d}")
-            sys.stderr.flush()
-        if not np.any(status == _RUNNING):
-            break
-        carry = _phase(batched, shared, carry, w, scales, chunk, settings, start=False, **args)
-    if progress:
-        sys.stderr.write("\n")
-    runner["devices"] = tuple(str(d) for d in carry["status"].sharding.device_set)
-    steps = _to_host(carry["steps"])[:B]
-    kmax = max(int(steps.max()), 1)
-    host = {k: _to_host(carry[k]) for k in ("status", "steps", "sign0", "attempts", "iterations")}
-    host.update({k: _to_host(carry[k][:, :kmax]) for k in ("X", "P", "SIGN", "ITER")})
-    return [{k: v[i] for k, v in host.items()} for i in range(B)]
+def _stack(trees):
+    return jax.tree_util.tree_map(lambda *xs: jnp.stack([jnp.asarray(x) for x in xs]), *trees)
 
 
-def _run_protocol(members, runner, progress):
-    """All phases for all members; a member that fails a phase stops there (its slot in later
-    phases runs a copy of a live member, discarded).  Returns the status per member and the
-    work [B, phases, 2] (attempts, Newton iterations)."""
-    status = np.full(len(members), int(Status.CONVERGED))
-    work = np.zeros((len(members), len(members[0].names), 2), np.int64)
-    for index, name in enumerate(members[0].names):
-        live = np.flatnonzero(status == Status.CONVERGED)
-        if not live.size:
-            break
-        plans = {int(i): members[i]._phase(index) for i in live}
-        order = [plans.get(i, plans[int(live[0])]) for i in range(len(members))]
-        weights = [path_weights(m.x0, m.geometry, m.network.n_nodes, plan[1]) for m, plan in zip(members, order)]
-        carries = _run_batch(order, weights, runner, progress, name)
-        for i in live:
-            members[i]._finish(index, carries[i], plans[int(i)][3])
-            status[i] = int(carries[i]["status"])
-            work[i, index] = carries[i]["attempts"], carries[i]["iterations"]
-    return status, work
+class _Batch:
+    """The phases of every member, run as one vmapped (optionally sharded) program."""
+
+    def __init__(self, models, u_max, unload, settings, inner, mesh, progress):
+        self.B, self.mesh, self.settings, self.u_max = len(models), mesh, settings, float(u_max)
+        self.size = self.B if mesh is None else -(-self.B // mesh.size) * mesh.size
+        self.models = _place(_stack(_pad(models, self.size)), mesh, P("batch"))
+        self.inner, self.recorder, self.progress = inner, StepRecorder(settings.max_steps), progress
+        self.chunk = 25 if progress else settings.max_steps
+        self.names = ["settle", "loading"] + (["unloading"] if unload else [])
+        self.x = [ravel_pytree(m.initial_state())[0] for m in models]
+        self.u0, self.sign_ref = np.zeros(self.B), np.zeros(self.B)
+        self.status = ["successful"] * self.B
+        self.parts = [[] for _ in range(self.B)]
+        self.work = np.zeros((self.B, len(self.names), 2), np.int64)
+        self.devices = ()
+
+    def _run(self, index, live):
+        shared = _place((jnp.asarray(index), jnp.asarray(self.u_max), self.settings.traced(), jnp.asarray(self.chunk)),
+                        self.mesh, P())
+        batched = _place((jnp.asarray(_pad(list(self.u0), self.size)), jnp.stack(_pad(self.x, self.size)),
+                          jnp.asarray(_pad(list(live), self.size))), self.mesh, P("batch"))
+        args = dict(inner=self.inner, recorder=self.recorder, mesh=self.mesh)
+        state = _phase(self.models, shared[0], batched[0], shared[1], batched[1], None, batched[2], shared[2], shared[3], **args)
+        while True:
+            done = _to_host(state.done)[: self.B]
+            if self.progress:
+                sys.stderr.write(f"\r{self.names[index]:>9s}: {int(done.sum())}/{self.B} members done, "
+                                 f"steps {int(_to_host(state.steps).max()):5d}")
+                sys.stderr.flush()
+            if done.all():
+                break
+            state = _phase(self.models, shared[0], batched[0], shared[1], batched[1], state, batched[2], shared[2], shared[3], **args)
+        if self.progress:
+            sys.stderr.write("\n")
+        self.devices = tuple(str(d) for d in state.done.sharding.device_set)
+        return state
+
+    def _finish(self, index, state, b):
+        k = int(_to_host(state.steps)[b])
+        rec = {name: _to_host(v)[b, :k] for name, v in state.recorder.items()}
+        x = _to_host(state.x)[b]
+        self.work[b, index] = int(_to_host(state.attempts)[b]), int(_to_host(state.iterations)[b])
+        self.status[b] = result_name(jax.tree_util.tree_map(lambda a: _to_host(a)[b], state.result))
+        if index == 0:
+            self.u0[b] = float(settled_displacement(jax.tree_util.tree_map(lambda a: a[b], self.models), jnp.asarray(x)))
+            self.parts[b] = [dict(X=x[None], U=np.array([self.u0[b]]), SIGN=np.zeros(1), ITER=np.array([k], np.int32),
+                                  PHASE=np.zeros(1, np.int8))]
+        else:
+            if index == 1:
+                self.sign_ref[b] = float(_to_host(state.sign0)[b])
+                self.parts[b][0]["SIGN"] = np.array([self.sign_ref[b]])
+            u0 = self.u0[b]
+            u_from, u_to = (u0, self.u_max) if index == 1 else (self.u_max, u0 + UNLOAD_MARGIN * (self.u_max - u0))
+            self.parts[b].append(dict(X=rec["X"], U=u_from + rec["P"] * (u_to - u_from), SIGN=rec["SIGN"],
+                                      ITER=rec["ITER"], PHASE=np.full(k, index, np.int8)))
+        self.x[b] = jnp.asarray(x)
+
+    def run(self):
+        for index in range(len(self.names)):
+            live = np.array([s == "successful" for s in self.status])
+            if not live.any():
+                break
+            state = self._run(index, live)
+            for b in np.flatnonzero(live):
+                self._finish(index, state, int(b))
 
 
 # ----------------------------------------------------------------------------- results
-def _padded_records(rec: dict, M: int) -> dict:
-    """The records repeated on their last row up to M rows: one compiled observation serves
-    every member, and repeated rows add no events (no change in u, F or det sign)."""
-    k = len(rec["U"])
-    return {key: np.concatenate([v, np.repeat(v[-1:], M - k, axis=0)]) for key, v in rec.items()}
-
-
-def _trim(result: CompressionResult, k: int, M: int) -> CompressionResult:
-    rows = {f.name: getattr(result, f.name)[:k] for f in dataclasses.fields(result)
-            if f.name != "end_nodes" and isinstance(getattr(result, f.name), np.ndarray)
-            and getattr(result, f.name).ndim and getattr(result, f.name).shape[0] == M}
-    return dataclasses.replace(result, **rows)
-
-
-def _results(members, status, work, options, devices) -> EnsembleResult:
-    recs = [_concat(m.parts) for m in members]
+def _results(batch: _Batch, models, settings, unload) -> EnsembleResult:
+    recs = [{k: np.concatenate([p[k] for p in parts]) for k in parts[0]} for parts in batch.parts]
     M = max(len(r["U"]) for r in recs)
-    results = [
-        _trim(_package(m.model, m.loads, _padded_records(rec, M), m.extra, int(s), m.network, None, options), len(rec["U"]), M)
-        for m, rec, s in zip(members, recs, status)
-    ]
+    results = [package_path(model, rec, {"u0": batch.u0[b], "sign_ref": batch.sign_ref[b]}, result_from_name(batch.status[b]),
+                            settings, batch.u_max, unload, None) for b, (model, rec) in enumerate(zip(models, recs))]
     B = len(results)
     disp, force, phase = np.full((B, M), np.nan), np.full((B, M), np.nan), np.full((B, M), -1, np.int8)
     for b, r in enumerate(results):
         disp[b, : r.n_steps], force[b, : r.n_steps], phase[b, : r.n_steps] = r.displacement, r.force, r.phase
-    n_steps = np.array([r.n_steps for r in results])
-    return EnsembleResult(disp, force, phase, n_steps, np.asarray(status, np.int32), results, devices, work[..., 0], work[..., 1])
+    return EnsembleResult(disp, force, phase, np.array([r.n_steps for r in results]), tuple(results),
+                          batch.work[..., 0], batch.work[..., 1], batch.devices)
 
 
 # -------------------------------------------------------------------------------- API
-def compress_ensemble(
-    networks: Sequence[Network],
-    displacement: float,
-    *,
-    unload: bool = False,
-    method: str = "displacement",
-    perturbation=None,
-    settings: PathSettings | None = None,
-    linear_solver: str = "auto",
-    quadrature_order: int = 8,
-    devices=None,
-    progress: bool = False,
-    throw: bool = True,
-) -> EnsembleResult:
+def compress_ensemble(networks: Sequence[Network], displacement: float, *, unload: bool = False, method: str | None = None,
+                      perturbation=None, settings=None, devices=None, progress: bool = False,
+                      throw: bool = True) -> EnsembleResult:
     """Compress every network of an ensemble by ``displacement`` µm: the protocol of
     :func:`socbjax.compress`, run for the whole batch as one compiled, vmapped continuation.
 
     Parameters
     ----------
-    networks : B networks of identical structure (same dimension, topology, supports, probe
-        and array shapes; :func:`socbjax._sparsity.structure_key`): only the values of
-        ``positions``, ``tangents``, ``lengths``, ``EI`` and ``loads`` may differ.  Typical:
-        one outcrop under many EI values or imperfection patterns
-        (``eqx.tree_at(lambda n: n.loads, net, strand_perturbation(net, f, seed=k))``).
-        Outcrops grown from different seeds differ in topology: they are separate ensembles.
+    networks : B networks of identical :class:`socbjax.Topology`: only the values of
+        ``positions``, ``tangents``, ``lengths``, ``EI``, ``loads`` and ``couples`` may
+        differ.  Typical: one outcrop under many EI values or imperfection patterns
+        (``net.replace(loads=sj.strand_perturbation(net, f, seed=k))``).  Outcrops grown from
+        different seeds differ in topology: they are separate ensembles.
     displacement : probe travel (µm), the same for every member; must stay below each
         member's probe–surface gap.
-    unload, method, settings, linear_solver, quadrature_order : as for
-        :func:`socbjax.compress` (one Jacobian-solver preparation serves the batch).
+    unload, method, settings : as for :func:`socbjax.compress` (one Jacobian-solver
+        preparation serves the batch).
     perturbation : None (each member's loads, else the default 1e-4 EI/L² per strand), one
         lateral force (pN) for all members, or a sequence of B forces.
     devices : None (the default device), an int (the first n of ``jax.devices()``) or a
-        list of jax devices: the batch axis is sharded over them with ``jax.shard_map``
-        (B padded to a multiple of their number; every device runs its own while-loops).
-        Several GPUs: ``devices=jax.devices()``.  Several hosts: call
+        list of jax devices: the batch axis is sharded over them with ``jax.shard_map`` (B
+        padded to a multiple of their number).  Several hosts: call
         ``jax.distributed.initialize()`` first in every process, build the same B networks
-        in each, and pass ``devices=jax.devices()`` (the global list); every process gets
-        the whole result.  On a CPU, ``XLA_FLAGS=--xla_force_host_platform_device_count=N``
-        (set before jax starts) splits it into N devices.  See ``docs/scaling.md``.
+        in each, and pass ``devices=jax.devices()``.  On a CPU,
+        ``XLA_FLAGS=--xla_force_host_platform_device_count=N`` (set before jax starts) splits
+        it into N devices.  See ``docs/scaling.md``.
     progress : report the members still running to stderr (the phases then run in chunks
         of 25 steps; the curves are identical).
-    throw : raise :class:`ConvergenceError` naming the members that did not complete
+    throw : raise :class:`socbjax.ConvergenceError` naming the members that did not complete
         (``error.result`` holds the ensemble); with ``throw=False`` check ``result.completed``.
 
-    Returns
-    -------
-    :class:`EnsembleResult`: curves [B, M] padded with NaN, ``n_steps`` [B], ``status`` [B],
-    and each member as a :class:`CompressionResult` (``result.member(i)``), equal to
+    Returns an :class:`EnsembleResult`: curves [B, M] padded with NaN, ``n_steps`` [B], and
+    each member as a :class:`CompressionResult` (``result.member(i)``), equal to
     ``socbjax.compress(networks[i], ...)`` up to round-off.
-
-    Example::
-
-        net = sj.dendritic_outcrop(generations=4, gap=4.0, dim=2)
-        ens = sj.compress_ensemble([eqx.tree_at(lambda n: n.EI, net, net.EI * s) for s in (0.5, 1, 2)], 0.5)
-        ens.force.shape  # (3, M); ens.member(1) is compress(members[1], 0.5)
     """
     nets = _check_members(networks)
     perturbations = _member_perturbations(perturbation, len(nets))
     mesh = _resolve_devices(devices)
-    settings = PathSettings() if settings is None else settings
-    if method != settings.method:
-        settings = PathSettings(**{**{f: getattr(settings, f) for f in settings.__dataclass_fields__}, "method": method})
-    members = []
+    settings = compress_settings(settings, method, displacement)
+    models = []
     for i, (net, pert) in enumerate(zip(nets, perturbations)):
         try:
-            u_max, member_settings = _check_inputs(net, displacement, settings)
-            loads = _loads(net, pert)
+            net, u_max = check_compress_inputs(net, displacement)
         except ValueError as exc:
             raise ValueError(f"member {i}: {exc}") from None
-        members.append(_Member(net, loads, u_max, unload, member_settings, linear_solver, quadrature_order))
-    settings = member_settings
-    chunk = 25 if progress else settings.max_steps
-    linsolver = _Protocol._linear_solver(members[0], linear_solver)
-    if mesh is not None and type(linsolver) is DenseJacobianSolver and any(d.platform == "cpu" for d in mesh.devices.flat):
-        linsolver = _MappedDenseSolver()
-    runner = dict(mesh=mesh, settings=settings, linsolver=linsolver, chunk=chunk, devices=())
-    status, work = _run_protocol(members, runner, progress)
-    options = dict(settings=settings, u_max=u_max, unload=unload, quadrature_order=quadrature_order)
-    result = _results(members, status, work, options, runner["devices"])
+        try:
+            loads = applied_loads(net, pert)
+        except ValueError as exc:
+            raise ValueError(f"member {i}: {exc}") from None
+        models.append(SOCBModel(net.replace(loads=loads), get_quadrature(settings.quadrature_order)))
+    inner = linear_solver_for(models[0], settings.linear_solver)
+    if mesh is not None and type(inner) is DenseLU and any(d.platform == "cpu" for d in mesh.devices.flat):
+        inner = MappedDenseLU()
+    batch = _Batch(models, u_max, unload, settings, inner, mesh, progress)
+    batch.run()
+    result = _results(batch, models, settings, unload)
     if throw and not result.completed.all():
         failed = np.flatnonzero(~result.completed)
-        lines = "; ".join(f"member {i}: {Status(int(result.status[i])).message} (reached u = "
+        lines = "; ".join(f"member {i}: {result_message(result.results[i].result)} (reached u = "
                           f"{result.results[i].displacement[-1]:.4g} µm)" for i in failed[:8])
         err = ConvergenceError(f"compress_ensemble: {failed.size} of {len(result)} members did not complete "
                                f"({lines}{'; ...' if failed.size > 8 else ''}). Try method='arclength', smaller "

@@ -19,7 +19,7 @@ from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.figure import Figure
 from matplotlib.ticker import MaxNLocator
 
-from ._io import _atomic_path
+from ._io import atomic_path
 from ._result import CompressionResult
 
 __all__ = [
@@ -272,5 +272,5 @@ def save_figures(result: CompressionResult, out_dir, *, steps=None, dpi: int = 1
         def write(tmp: Path, fig=fig) -> None:
             fig.savefig(tmp, format="png", dpi=dpi, bbox_inches="tight")
 
-        paths.append(_atomic_path(out / f"{name}.png", write))
+        paths.append(atomic_path(out / f"{name}.png", write))
     return paths

@@ -1,16 +1,9 @@
 """Least-squares fits of model parameters to a force–compression curve: :func:`fit`.
 
-Model.  For parameter values θ the predicted force at a data compression cᵢ (µm) is
-
-    F̂ᵢ = force_scale · F(cᵢ + contact_offset; θ) + baseline,   F = 0 before contact,
-
-where F(u; θ) is the probe force of the model (:mod:`socbjax._models`) at probe
-displacement u, computed by :func:`socbjax.compress` with ``at=`` the data compressions: the
-path is followed adaptively through buckling and collapse, and every data point is then
-solved *exactly* (no interpolation across a sharp force drop), with derivatives by the
-implicit function theorem.  The loss is ½ Σ (F̂ᵢ − Fᵢ)² (pN²) over the chosen branch
-(approach/loading by default).  Curves with more than ``max_points`` points are averaged in
-compression bins first.
+Model and residuals: :mod:`socbjax._fit_problem` (the probe force of a model, computed by
+:func:`socbjax.compress` with ``at=`` the data compressions, with implicit derivatives).  The
+loss is ½ Σ ((F̂ᵢ − Fᵢ)/σᵢ)² over the chosen branch (approach/loading by default).  Curves
+with more than ``FitSettings.max_points`` points are averaged in compression bins first.
 
 Optimisers.  ``"lm"`` (default): Levenberg–Marquardt on the unconstrained parameters (bounds
 by transforms, :class:`socbjax.Parameter`) with Marquardt's diagonal scaling; the residual
@@ -37,23 +30,66 @@ import math
 import sys
 import time
 
+import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
 
-from ._afm import ForceCurve
-from ._models import FitModel, make_fit_model
-from ._parameters import NUISANCE_PARAMETERS
+from ._fit_problem import BRANCHES, fit_problem
+from ._path import PathSettings
+from ._solution import RESULTS, ConvergenceError
 
-__all__ = ["fit", "FitResult", "fit_problem"]
+__all__ = ["fit", "FitResult", "FitSettings", "OPTIMIZERS"]
 
 OPTIMIZERS = ("lm", "adam", "lbfgs")
-BRANCHES = ("loading", "unloading")
 _CORRELATION_LIMIT = 0.995
 
 
-@dataclasses.dataclass(eq=False)
-class FitResult:
+@dataclasses.dataclass(frozen=True)
+class FitSettings:
+    """How :func:`fit` optimises and which data it uses.
+
+    optimizer : "lm" (Levenberg–Marquardt, default), "adam" or "lbfgs" (optax).
+    max_iterations, tolerance : optimiser limits (relative loss decrease / step size).
+    learning_rate : Adam's step size in the unconstrained variables.
+    branch : "loading" (approach, default) or "unloading" (retract).
+    max_points : curves with more points are averaged in this many compression bins.
+    min_compression : drop points below this compression (µm); default for a ForceCurve
+        −¼ of its maximum compression (some baseline before contact, not the whole approach).
+    method : path following of :func:`socbjax.compress`: "displacement" (default, the AFM's
+        own control; stops with a clear error at a fold) or "arclength" (follows
+        snap-throughs; samples then take the first crossing of each compression).
+    path : :class:`socbjax.PathSettings` of those compressions.
+    """
+
+    optimizer: str = "lm"
+    max_iterations: int = 30
+    tolerance: float = 1e-8
+    learning_rate: float = 0.05
+    branch: str = "loading"
+    max_points: int = 80
+    min_compression: float | None = None
+    method: str = "displacement"
+    path: PathSettings | None = None
+
+    def __post_init__(self):
+        if self.optimizer not in OPTIMIZERS:
+            raise ValueError(f"FitSettings.optimizer must be one of {OPTIMIZERS}, got {self.optimizer!r}")
+        if isinstance(self.max_iterations, bool) or int(self.max_iterations) != self.max_iterations or self.max_iterations < 1:
+            raise ValueError(f"FitSettings.max_iterations must be a positive integer, got {self.max_iterations!r}")
+        for name in ("tolerance", "learning_rate"):
+            value = getattr(self, name)
+            if not (math.isfinite(float(value)) and float(value) > 0):
+                raise ValueError(f"FitSettings.{name} must be a positive finite number, got {value!r}")
+        if self.branch not in BRANCHES:
+            raise ValueError(f"FitSettings.branch must be one of {BRANCHES}, got {self.branch!r}")
+        if self.method not in ("displacement", "arclength"):
+            raise ValueError(f"FitSettings.method must be 'displacement' or 'arclength', got {self.method!r}")
+        if self.path is not None and not isinstance(self.path, PathSettings):
+            raise TypeError(f"FitSettings.path must be a socbjax.PathSettings, got {type(self.path).__name__}")
+
+
+class FitResult(eqx.Module):
     """Outcome of :func:`fit`.  Units: µm, pN, pN·µm², degrees (see ``units``).
 
     names : the free parameters, in the order of ``correlation``.
@@ -67,6 +103,7 @@ class FitResult:
         singular — then the values are not determined by the data (see ``warnings``).
     history : per iteration ``{"iteration", "loss", "values", "damping"}``.
     compression, force, model_force, residuals : [m] the data points fitted and the model.
+    result : :class:`socbjax.RESULTS` item (``successful`` when ``converged``).
     """
 
     model: str
@@ -89,6 +126,7 @@ class FitResult:
     optimizer: str
     n_evaluations: int
     elapsed_s: float
+    result: RESULTS
 
     @property
     def residuals(self) -> np.ndarray:
@@ -106,7 +144,7 @@ class FitResult:
         return "\n".join(lines)
 
     def to_dict(self) -> dict:
-        out = {f.name: getattr(self, f.name) for f in dataclasses.fields(self)}
+        out = {f.name: getattr(self, f.name) for f in dataclasses.fields(self) if f.name != "result"}
         for key in ("correlation", "covariance", "compression", "force", "model_force"):
             out[key] = np.asarray(out[key]).tolist()
         out["residuals"] = self.residuals.tolist()
@@ -114,159 +152,10 @@ class FitResult:
 
     def save(self, path) -> None:
         """Write the result as JSON, atomically (temporary file, then rename)."""
-        from ._io import _atomic_path
+        from ._io import atomic_path
 
         text = json.dumps(self.to_dict(), indent=2)
-        _atomic_path(path, lambda tmp: tmp.write_text(text))
-
-
-# ------------------------------------------------------------------------- set-up checks
-def _data(curve, branch: str, max_points: int, min_compression):
-    if isinstance(curve, ForceCurve):
-        segment = 0 if branch == "loading" else 1
-        part = curve if np.all(curve.segment == segment) else (curve.approach if segment == 0 else curve.retract)
-        if len(part) == 0 or part.compression.max() <= 0:
-            raise ValueError(f"the {branch} branch never passes the contact point (no compression > 0): nothing to fit")
-        low = -0.25 * part.compression.max() if min_compression is None else float(min_compression)
-        part = part.select(min_compression=low)
-        if len(part) > max_points:
-            part = part.binned(max_points)
-        c, F = np.asarray(part.compression, float), np.asarray(part.force, float)
-    else:
-        try:
-            c, F = (np.asarray(a, float) for a in curve)
-        except (TypeError, ValueError) as err:
-            raise TypeError("curve must be a socbjax.ForceCurve or a pair (compression µm, force pN)") from err
-        if c.ndim != 1 or c.shape != F.shape:
-            raise ValueError(f"compression and force must be 1-D arrays of equal length, got {c.shape} and {F.shape}")
-        if not (np.all(np.isfinite(c)) and np.all(np.isfinite(F))):
-            bad = int(np.sum(~np.isfinite(c)) + np.sum(~np.isfinite(F)))
-            raise ValueError(f"the curve contains {bad} NaN/inf values; drop those points before fitting")
-        if c.size and np.any(np.diff(c) < 0):
-            raise ValueError(
-                "compression must be non-decreasing along the curve (one branch, sorted); sort the points, or load "
-                "a measured curve with socbjax.load_curve, which separates approach and retract"
-            )
-        if min_compression is not None:
-            keep = c >= float(min_compression)
-            c, F = c[keep], F[keep]
-    if c.size < 3:
-        raise ValueError(f"the {branch} branch has {c.size} points; a fit needs at least 3")
-    if c.max() <= 0:
-        raise ValueError("the curve never passes the contact point (all compressions ≤ 0): nothing to fit")
-    return c, F
-
-
-def _parameter_table(model: FitModel, free, fixed, initial, bounds):
-    table = {**model.parameters, **NUISANCE_PARAMETERS}
-    free = tuple(free.split(",")) if isinstance(free, str) else tuple(free)
-    fixed, initial, bounds = dict(fixed or {}), dict(initial or {}), dict(bounds or {})
-    for name in (*free, *fixed, *initial, *bounds):
-        if name not in table:
-            raise ValueError(f"unknown parameter {name!r} for model {model.name}; known: {sorted(table)}")
-    if not free:
-        raise ValueError("no free parameters: name at least one in free=, e.g. free=('EI',)")
-    both = set(free) & set(fixed)
-    if both or len(set(free)) != len(free):
-        raise ValueError(f"parameters listed twice or both free and fixed: {sorted(both) or free}")
-    for name, (lo, hi) in bounds.items():
-        table[name] = table[name].with_bounds(lo, hi)
-    for name in initial:
-        if name not in free:
-            raise ValueError(f"initial value given for {name!r}, which is not free; use fixed= for fixed values")
-    fixed = {n: table[n].check(v, "fixed value") for n, v in fixed.items()}
-    start = {n: table[n].check(initial.get(n, table[n].value), "initial value") for n in free}
-    return table, free, fixed, start
-
-
-def _check_identifiable(model: FitModel, free, fixed) -> None:
-    if "force_scale" not in free:
-        return
-    source = np.full(model.base.n_segments, "EI", dtype=object)  # the parameter each segment's EI comes from
-    for name, mask in model.groups.items():
-        if name in free or name in fixed:
-            source[mask] = name
-    ei_free = sorted(set(source) & set(free))
-    if all(name in free for name in source):
-        raise ValueError(
-            f"force_scale and {', '.join(ei_free)} are not separately identifiable from one curve: at fixed geometry "
-            "the force scales with EI (exactly with the default perturbation, which scales with EI), "
-            "F ∝ EI × force_scale, so only their product is determined. "
-            "Fix one of them, e.g. fixed={'force_scale': 1.0} (one outcrop under the probe) or fix EI"
-        )
-
-
-# ----------------------------------------------------------------------- the residuals
-def _sigma(sigma, m: int, curve) -> np.ndarray:
-    """Per-point force uncertainty [m] (pN): 1 (unweighted), a scalar, or one per point."""
-    if sigma is None:
-        return np.ones(m)
-    s = np.asarray(sigma, float)
-    if s.ndim == 1 and isinstance(curve, ForceCurve) and s.size != m:
-        raise ValueError("per-point sigma needs the curve as (compression, force) arrays (ForceCurves may be binned)")
-    s = np.broadcast_to(s, (m,)) if s.ndim == 0 else s
-    if s.shape != (m,) or not np.all(np.isfinite(s)) or np.any(s <= 0):
-        raise ValueError(f"sigma must be positive and finite, a scalar or one value per point ({m}), got shape {s.shape}")
-    return np.array(s)
-
-
-def fit_problem(curve, model="unit-mesh", *, free=("EI",), fixed=None, initial=None, bounds=None, branch="loading",
-                max_points: int = 80, min_compression=None, method: str = "displacement", settings=None,
-                model_options=None, sigma=None) -> dict:
-    """Everything :func:`fit` optimises, checked and assembled (no optimisation): a dict with
-    ``residuals`` (z [p] -> r [m]: (model − data)/σ; traced, differentiable; NaN where the
-    path cannot be followed, or a ``ConvergenceError`` with ``throw=True`` untraced), ``to_values`` (z -> dict),
-    ``z0``, the data arrays, the parameter ``table`` and the model.  Useful to evaluate
-    the loss or its gradient at chosen values (e.g. to check gradients)."""
-    if branch not in BRANCHES:
-        raise ValueError(f"branch must be one of {BRANCHES}, got {branch!r}")
-    if int(max_points) < 3:
-        raise ValueError(f"max_points must be at least 3, got {max_points!r}")
-    model = make_fit_model(model, **(model_options or {}))
-    free = tuple(n.strip() for n in free.split(",")) if isinstance(free, str) else tuple(free)
-    c, F = _data(curve, branch, int(max_points), min_compression)
-    bounds = dict(bounds or {})
-    if "contact_offset" in free and "contact_offset" not in bounds:
-        # the offset moves the contact point within the data's own range: beyond it the model
-        # would be sampled past the data (or entirely before contact) and the fit is degenerate
-        bounds["contact_offset"] = (-0.5 * float(c.max()), 0.1 * float(c.max()))
-    table, free, fixed, start = _parameter_table(model, free, fixed, initial, bounds)
-    _check_identifiable(model, free, fixed)
-    offset_room = max(0.0, table["contact_offset"].upper or 0.0) if "contact_offset" in free else 0.0
-    reach = float(c.max()) + max(fixed.get("contact_offset", start.get("contact_offset", 0.0)), 0.0) + offset_room
-    if reach >= model.gap:
-        raise ValueError(
-            f"the curve reaches {float(c.max()):.4g} µm of compression (plus contact offset), but the {model.name} model "
-            f"can be compressed by less than {model.gap:.4g} µm (probe–surface gap); crop the curve, e.g. "
-            f"curve.select(max_compression={0.9 * model.gap:.3g}), or use a model with a larger gap"
-        )
-    physical = [n for n in (*free, *fixed) if n in model.parameters]
-
-    def to_values(z):
-        values = {n: table[n].to_value(z[i]) for i, n in enumerate(free)}
-        return {**fixed, **values}
-
-    sigma = _sigma(sigma, c.size, curve)
-    c_j, F_j, sigma_j = jnp.asarray(c), jnp.asarray(F), jnp.asarray(sigma)
-    unload = branch == "unloading"
-    floor = 1e-6 * reach
-
-    def residuals(z, throw: bool = False):
-        from ._compress import compress
-
-        values = to_values(z)
-        network = model.network({n: values[n] for n in physical})
-        u = c_j + values.get("contact_offset", 0.0)
-        result = compress(network, reach, at=jnp.clip(u, floor, reach), unload=unload, method=method,
-                          settings=settings, perturbation=values.get("perturbation"), throw=throw)
-        force = result.force[c.size:][::-1] if unload else result.force
-        predicted = values.get("force_scale", 1.0) * jnp.where(u > 0, force, 0.0) + values.get("baseline", 0.0)
-        # a path that fails at these values gives NaN residuals: the optimiser rejects the step
-        return jnp.where(jnp.all(result.converged), (predicted - F_j) / sigma_j, jnp.nan)
-
-    z0 = jnp.asarray([table[n].to_z(start[n]) for n in free])
-    return dict(residuals=residuals, to_values=to_values, z0=z0, compression=c, force=F, sigma=sigma, table=table,
-                free=free, fixed=fixed, model=model, reach=reach)
+        atomic_path(path, lambda tmp: tmp.write_text(text))
 
 
 class _Progress:
@@ -315,7 +204,7 @@ def _levenberg_marquardt(jac, z, max_iterations, tolerance, report):
         decrease = loss - loss_new
         z, J, r, loss, damping = jnp.asarray(trial), J_new, r_new, loss_new, max(damping / 3.0, 1e-9)
         history.append({"iteration": iteration, "loss": loss, "damping": damping, "z": np.asarray(z).tolist()})
-        report(iteration, loss)
+        report(iteration, loss, z)
         if decrease <= tolerance * loss or np.max(np.abs(step)) <= tolerance * (1.0 + float(np.max(np.abs(z)))):
             converged, message = True, "converged (relative loss decrease or step below tolerance)"
             break
@@ -350,16 +239,14 @@ def _optax(loss_and_grad, loss_fn, z, optimizer, max_iterations, tolerance, lear
 
 
 # ------------------------------------------------------------------------------ fit
-def _check_start(residuals, problem) -> None:
+def _check_start(problem) -> None:
     """Evaluate the model once at the initial values, untraced, so that a path that cannot be
     followed over the data's range fails here with the solver's own message."""
-    from ._solve import ConvergenceError
-
     try:
-        r = np.asarray(residuals(problem["z0"], throw=True))
+        r = np.asarray(problem.residuals(problem.z0, throw=True))
     except ConvergenceError as err:
         raise ValueError(
-            f"the model cannot be evaluated over the data's compression range (up to {problem['reach']:.4g} µm) at the "
+            f"the model cannot be evaluated over the data's compression range (up to {problem.reach:.4g} µm) at the "
             f"initial values: {err} Crop the curve (max_compression), use method='arclength', or start elsewhere"
         ) from None
     if not np.all(np.isfinite(r)):
@@ -408,11 +295,22 @@ def _uncertainties(J, r, z, table, free):
     return se, corr, cov, identifiable, warnings
 
 
+def _optimise(problem, settings: FitSettings, report):
+    """Run the chosen optimiser: (z, history, converged, message, evaluations, jac)."""
+    jac = jax.jit(jax.jacfwd(_with_value(problem.residuals), has_aux=True))  # one path per evaluation
+    if settings.optimizer == "lm":
+        z, _, _, history, converged, message, evaluations = _levenberg_marquardt(
+            jac, problem.z0, settings.max_iterations, settings.tolerance, report)
+        return z, history, converged, message, evaluations, jac
+    loss = lambda z: 0.5 * jnp.sum(problem.residuals(z) ** 2)  # noqa: E731
+    out = _optax(jax.jit(jax.value_and_grad(loss)), jax.jit(loss), problem.z0, settings.optimizer,
+                 settings.max_iterations, settings.tolerance, settings.learning_rate, report)
+    return (*out, jac)
+
+
 def fit(curve, model="unit-mesh", *, free=("EI",), fixed: dict | None = None, initial: dict | None = None,
-        bounds: dict | None = None, branch: str = "loading", optimizer: str = "lm", max_iterations: int = 30,
-        tolerance: float = 1e-8, learning_rate: float = 0.05, max_points: int = 80, min_compression=None,
-        method: str = "displacement",
-        settings=None, model_options: dict | None = None, sigma=None, progress: bool = False) -> FitResult:
+        bounds: dict | None = None, sigma=None, settings: FitSettings | None = None, model_options: dict | None = None,
+        progress: bool = False) -> FitResult:
     """Fit model parameters to a force–compression curve (see the module docstring).
 
     Parameters
@@ -428,73 +326,52 @@ def fit(curve, model="unit-mesh", *, free=("EI",), fixed: dict | None = None, in
     initial : name -> starting value of free parameters (default: the parameter defaults).
     bounds : name -> (lower, upper) replacing a parameter's bounds (None: open side).  A free
         ``contact_offset`` is bounded to (−½, +0.1) × the data's maximum compression by default.
-    branch : "loading" (approach, default) or "unloading" (retract).
-    optimizer : "lm" (Levenberg–Marquardt, default), "adam" or "lbfgs" (optax).
-    max_iterations, tolerance : optimiser limits (relative loss decrease / step size).
-    learning_rate : Adam's step size in the unconstrained variables.
-    max_points : curves with more points are averaged in this many compression bins.
-    min_compression : drop points below this compression (µm); default for a ForceCurve
-        −¼ of its maximum compression (some baseline before contact, not the whole approach).
-    method, settings : path following of :func:`socbjax.compress`: "displacement" (default,
-        the AFM's own control; stops with a clear error at a fold) or "arclength" (follows
-        snap-throughs; samples then take the first crossing of each compression).
     sigma : force uncertainty per point (pN; scalar or [m] for array curves): weighted least
         squares, residuals (model − data)/σ; standard errors are scaled by the residual
         variance either way (like ``scipy.optimize.curve_fit`` with ``absolute_sigma=False``).
+    settings : :class:`socbjax.FitSettings` (optimiser, iterations, tolerance, branch, data
+        binning and cropping, path following of the model).
     progress : a progress line over optimiser iterations on stderr.
 
     Returns a :class:`FitResult`.  Raises ``ValueError`` for unknown or doubly-specified
     parameters, values outside bounds, non-identifiable combinations, curves that never reach
     contact or reach beyond the model's gap, and fewer than 3 points.
     """
-    if optimizer not in OPTIMIZERS:
-        raise ValueError(f"optimizer must be one of {OPTIMIZERS}, got {optimizer!r}")
-    if int(max_iterations) < 1:
-        raise ValueError(f"max_iterations must be a positive integer, got {max_iterations!r}")
-    problem = fit_problem(curve, model, free=free, fixed=fixed, initial=initial, bounds=bounds, branch=branch,
-                          max_points=max_points, min_compression=min_compression, method=method, settings=settings,
-                          model_options=model_options, sigma=sigma)
-    residuals, free, table = problem["residuals"], problem["free"], problem["table"]
+    settings = FitSettings() if settings is None else settings
+    if not isinstance(settings, FitSettings):
+        raise TypeError(f"settings must be a socbjax.FitSettings, got {type(settings).__name__}")
+    problem = fit_problem(curve, model, free=free, fixed=fixed, initial=initial, bounds=bounds, sigma=sigma,
+                          branch=settings.branch, max_points=settings.max_points,
+                          min_compression=settings.min_compression, method=settings.method, path=settings.path,
+                          model_options=model_options)
     t0 = time.perf_counter()
-    _check_start(residuals, problem)
-    jac = jax.jit(jax.jacfwd(_with_value(residuals), has_aux=True))  # one path per evaluation
-    bar = _Progress(progress, int(max_iterations))
+    _check_start(problem)
+    bar = _Progress(progress, settings.max_iterations)
 
-    def report(iteration, loss, z=None):
-        bar(iteration, loss, _float_values(problem["to_values"](z if z is not None else z_now[0])))
+    def report(iteration, loss, z):
+        bar(iteration, loss, _float_values(problem.to_values(z)))
 
-    z_now = [problem["z0"]]
-    if optimizer == "lm":
-        def tracked(z):
-            z_now[0] = z
-            return jac(z)
+    z, history, converged, message, evaluations, jac = _optimise(problem, settings, report)
+    return _result(problem, settings, jac, z, history, converged, message, evaluations, bar, t0)
 
-        z, r, J, history, converged, message, evaluations = _levenberg_marquardt(
-            tracked, problem["z0"], int(max_iterations), float(tolerance), report)
-    else:
-        loss_fn = jax.jit(lambda z: 0.5 * jnp.sum(residuals(z) ** 2))
-        loss_and_grad = jax.jit(jax.value_and_grad(lambda z: 0.5 * jnp.sum(residuals(z) ** 2)))
 
-        z, history, converged, message, evaluations = _optax(
-            loss_and_grad, loss_fn, problem["z0"], optimizer, int(max_iterations), float(tolerance),
-            float(learning_rate), report)
+def _result(problem, settings, jac, z, history, converged, message, evaluations, bar, t0) -> FitResult:
     J, r = (np.asarray(a) for a in jac(jnp.asarray(z)))
-    values = _float_values(problem["to_values"](jnp.asarray(z)))
+    values = _float_values(problem.to_values(jnp.asarray(z)))
     if not (np.all(np.isfinite(r)) and np.all(np.isfinite(J))):
-        from ._solve import ConvergenceError
-
         raise ConvergenceError(f"the fit ended at {values}, where the model path cannot be followed ({message}); "
                                "use optimizer='lm' or other initial values")
     bar(len(history), 0.5 * float(r @ r), values, done=True)
     for h in history:
-        h["values"] = _float_values(problem["to_values"](jnp.asarray(h.pop("z"))))
+        h["values"] = _float_values(problem.to_values(jnp.asarray(h.pop("z"))))
+    free, table = problem.free, problem.table
     se, corr, cov, identifiable, warnings = _uncertainties(J, r, np.asarray(z), table, free)
-    weighted, r = r, r * problem["sigma"]  # back to pN
-    units = {n: table[n].unit for n in values}
+    weighted, r = r, r * problem.sigma  # back to pN
     return FitResult(
-        model=problem["model"].name, names=free, values=values, standard_errors=dict(zip(free, map(float, se))),
+        model=problem.model.name, names=free, values=values, standard_errors=dict(zip(free, map(float, se))),
         correlation=corr, covariance=cov, loss=0.5 * float(weighted @ weighted), rms=float(np.sqrt(np.mean(r**2))),
         converged=bool(converged), message=message, identifiable=identifiable, warnings=warnings, history=history,
-        compression=problem["compression"], force=problem["force"], model_force=problem["force"] + r, units=units,
-        optimizer=optimizer, n_evaluations=int(evaluations) + 1, elapsed_s=time.perf_counter() - t0,
+        compression=problem.compression, force=problem.force, model_force=problem.force + r,
+        units={n: table[n].unit for n in values}, optimizer=settings.optimizer, n_evaluations=int(evaluations) + 1,
+        elapsed_s=time.perf_counter() - t0, result=RESULTS.successful if converged else RESULTS.nonlinear_max_steps_reached,
     )

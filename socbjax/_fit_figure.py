@@ -12,7 +12,7 @@ from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.figure import Figure
 
 from ._fit import FitResult
-from ._io import _atomic_path
+from ._io import atomic_path
 
 __all__ = ["plot_fit", "save_fit_figure"]
 
@@ -42,4 +42,4 @@ def plot_fit(result: FitResult, *, title: str | None = None) -> Figure:
 def save_fit_figure(result: FitResult, path, *, dpi: int = 150, title: str | None = None) -> Path:
     """Write :func:`plot_fit` as a PNG at ``path``, atomically; returns the path."""
     fig = plot_fit(result, title=title)
-    return _atomic_path(Path(path).expanduser(), lambda tmp: fig.savefig(tmp, format="png", dpi=dpi, bbox_inches="tight"))
+    return atomic_path(Path(path).expanduser(), lambda tmp: fig.savefig(tmp, format="png", dpi=dpi, bbox_inches="tight"))

@@ -4,10 +4,12 @@ checkpoints of long runs (:func:`save_checkpoint` / :func:`load_checkpoint`).
 Layout of a result file (``format = "socbjax.compression"``, ``format_version = 1``)::
 
     /                 attrs: format, format_version, socbjax_version, created (UTC, ISO 8601),
-                             status (int, see socbjax.Status), parameters (JSON string)
+                             result (name of a socbjax.RESULTS item; format 1: integer
+                             status), parameters (JSON string)
     /path/<field>     one dataset per array field of the result (displacement, force, ...)
     /limit_points/    parallel datasets kind, step, displacement, force, phase (strings UTF-8)
-    /network/<field>  one dataset per array field of the Network; static fields (dim) as attrs
+    /network/<field>  one dataset per value (positions, ..., couples) and per topology array of
+                      the Network (segments, position_projector, ...); attr dim
     /units            attrs: field -> unit (µm, pN, pN·µm, ...); datasets also carry "units"
 
 Every file is written atomically: into a temporary file ``.<name>.<random>.tmp`` in the
@@ -34,15 +36,20 @@ from pathlib import Path
 from typing import Any
 
 import h5py
+import jax
 import jax.numpy as jnp
 import numpy as np
 
-from ._network import Network
+from ._network import DIFFERENTIABLE_FIELDS, Network, Topology
 from ._result import PHASES, CompressionResult, LimitPoint
+from ._solution import LEGACY_STATUS, result_from_name, result_name
 
-__all__ = ["FORMAT_VERSION", "UNITS", "load", "load_checkpoint", "save", "save_checkpoint"]
+TOPOLOGY_FIELDS = ("segments", "position_projector", "clamped", "moment_free", "attach", "transfer_segment",
+                   "leaving_segment", "probe", "probe_direction", "strand", "socb_rows")
 
-FORMAT_VERSION = 1
+__all__ = ["FORMAT_VERSION", "UNITS", "atomic_path", "load", "load_checkpoint", "save", "save_checkpoint"]
+
+FORMAT_VERSION = 2  # 2: result name (RESULTS), network couples and topology; 1 still readable
 RESULT_FORMAT = "socbjax.compression"
 CHECKPOINT_FORMAT = "socbjax.checkpoint"
 UNITS = {
@@ -60,10 +67,12 @@ UNITS = {
     "network/lengths": "µm",
     "network/EI": "pN·µm²",
     "network/loads": "pN",
+    "network/couples": "pN·µm",
     "network/probe_direction": "1",
 }
 _COMPRESS_ABOVE = 4096  # elements; smaller datasets are stored contiguous, uncompressed
-_NOT_PATH = ("limit_points", "status", "network", "parameters")
+_PATH_FIELDS = ("displacement", "force", "converged", "stable", "phase", "positions", "tangents", "moments",
+                "segment_forces", "end_nodes", "end_forces", "iterations")
 _LIMIT_TYPES = {"str": h5py.string_dtype("utf-8"), "int": np.dtype(np.int64), "float": np.dtype(np.float64)}
 
 
@@ -130,7 +139,7 @@ def _fsync(path: Path, directory: bool = False) -> None:
         os.close(fd)
 
 
-def _atomic_path(path, write) -> Path:
+def atomic_path(path, write) -> Path:
     """Call ``write(tmp)`` to create the file at a temporary path ``.<name>.<random>.tmp`` in
     the target's folder, flush it to disk and rename it onto ``path`` (``os.replace``); on any
     exception (KeyboardInterrupt included) remove the temporary file and re-raise, leaving a
@@ -166,7 +175,7 @@ def _atomic_write(path, fill, fmt: str) -> Path:
             f.attrs["created"] = datetime.datetime.now(datetime.UTC).isoformat(timespec="seconds")
             fill(f)
 
-    return _atomic_path(path, write)
+    return atomic_path(path, write)
 
 
 def _open(path, fmt: str) -> h5py.File:
@@ -209,7 +218,7 @@ def _require(group: h5py.Group, names, path, what: str) -> None:
 
 
 def _path_fields() -> list[str]:
-    return [f.name for f in dataclasses.fields(CompressionResult) if f.name not in _NOT_PATH]
+    return list(_PATH_FIELDS)
 
 
 def _write_limit_points(f: h5py.File, points) -> None:
@@ -239,26 +248,27 @@ def _read_limit_points(g: h5py.Group, path) -> list[LimitPoint]:
 
 def _write_network(f: h5py.File, network: Network) -> None:
     g = f.create_group("network")
-    for field in dataclasses.fields(network):
-        value = getattr(network, field.name)
-        if field.metadata.get("static"):
-            g.attrs[field.name] = value
-        else:
-            _dataset(g, field.name, _as_storable(f"network.{field.name}", value), UNITS.get(f"network/{field.name}"))
+    g.attrs["dim"] = network.dim
+    for name in DIFFERENTIABLE_FIELDS:
+        _dataset(g, name, _as_storable(f"network.{name}", getattr(network, name)), UNITS.get(f"network/{name}"))
+    for name in TOPOLOGY_FIELDS:
+        _dataset(g, name, np.asarray(getattr(network, name)))
 
 
 def _read_network(g: h5py.Group, path) -> Network:
-    values = {}
-    for field in dataclasses.fields(Network):
-        if field.metadata.get("static"):
-            if field.name not in g.attrs:
-                raise ValueError(f"{path}: /network lacks the attribute {field.name!r} (damaged or older file)")
-            attr = g.attrs[field.name]
-            values[field.name] = attr.item() if isinstance(attr, np.generic) else attr
-        else:
-            _require(g, [field.name], path, "/network")
-            values[field.name] = jnp.asarray(_read(g[field.name]))
-    return Network(**values)
+    if "dim" not in g.attrs:
+        raise ValueError(f"{path}: /network lacks the attribute 'dim' (damaged file)")
+    dim = int(g.attrs["dim"])
+    names = [n for n in TOPOLOGY_FIELDS if n != "leaving_segment"]
+    _require(g, [n for n in DIFFERENTIABLE_FIELDS if n != "couples"] + names, path, "/network")
+    topology = {name: _read(g[name]) for name in names}
+    n, s = topology["clamped"].shape[0], topology["segments"].shape[0]
+    leaving = np.full(n, s)
+    leaving[topology["segments"][:, 0]] = np.arange(s)
+    topology["leaving_segment"] = _read(g["leaving_segment"]) if "leaving_segment" in g else leaving
+    values = {name: jnp.asarray(_read(g[name])) for name in DIFFERENTIABLE_FIELDS if name in g}
+    values.setdefault("couples", jnp.zeros((n,) if dim == 2 else (n, 3)))  # format 1 had no couples
+    return Network(**values, topology=Topology(dim=dim, **topology))
 
 
 def save(result: CompressionResult, path) -> Path:
@@ -271,11 +281,16 @@ def save(result: CompressionResult, path) -> Path:
     """
     if not isinstance(result, CompressionResult):
         raise TypeError(f"save expects a CompressionResult (from socbjax.compress), got {type(result).__name__}")
-    parameters = _to_json(result.parameters, "result.parameters")
+    try:
+        parameters = _to_json(result.parameters, "result.parameters")
+    except ValueError as err:  # parameters_json that is not valid JSON
+        raise TypeError(f"result.parameters must be JSON-serialisable: {err}") from None
+    if any(isinstance(leaf, jax.core.Tracer) for leaf in jax.tree_util.tree_leaves(result)):
+        raise TypeError("save needs a concrete CompressionResult (call it outside jax.jit / jax.grad)")
     arrays = {name: _as_storable(name, getattr(result, name)) for name in _path_fields()}
 
     def fill(f: h5py.File) -> None:
-        f.attrs["status"] = int(result.status)
+        f.attrs["result"] = result_name(result.result)
         f.attrs["parameters"] = parameters
         g = f.create_group("path")
         for name, value in arrays.items():
@@ -306,11 +321,20 @@ def load(path) -> CompressionResult:
             points = [LimitPoint(**p) for p in json.loads(f.attrs.get("limit_points", "[]"))]
         return CompressionResult(
             **{name: _read(f["path"][name]) for name in fields},
-            limit_points=points,
-            status=int(f.attrs["status"]),
+            limit_points=tuple(points),
+            result=_read_result(f, path),
             network=_read_network(f["network"], path),
-            parameters=json.loads(f.attrs["parameters"]),
+            parameters_json=json.dumps(json.loads(f.attrs["parameters"])),
         )
+
+
+def _read_result(f: h5py.File, path):
+    if "result" in f.attrs:
+        return result_from_name(_text(f.attrs["result"]))
+    status = f.attrs.get("status")  # format 1: the integer codes of socbjax 0.1's Status
+    if status is None or not 0 <= int(status) < len(LEGACY_STATUS):
+        raise ValueError(f"{path}: the file has no valid result/status attribute ({status!r}); the file is damaged")
+    return result_from_name(LEGACY_STATUS[int(status)])
 
 
 # ----------------------------------------------------------------------------- checkpoints

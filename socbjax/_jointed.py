@@ -28,7 +28,7 @@ from jaxtyping import Array, Float
 
 from ._geometry import orthonormal_complement, rotation_vector
 from ._network import Network
-from ._residual import _support_rows, net_nodal_force
+from ._residual import Control, net_nodal_force, support_rows
 
 __all__ = ["JointedState", "JointedModel", "joint_moments"]
 
@@ -75,9 +75,21 @@ def joint_moments(state: JointedState, network: Network):
 
 
 class JointedModel(eqx.Module):
-    """The jointed discretisation of a network (same solver interface as SOCB)."""
+    """The jointed discretisation of a network (same solver interface as SOCB).
+
+    Nodal couples C enter the bar moment balances as moment jumps: the bar leaving a node
+    starts with m − C, and at a node where no bar leaves the ending bar ends with m + C
+    (see :mod:`socbjax._junction`); 3D twisting components are dropped with the ⊥d projection.
+    """
 
     network: Network
+    name = "jointed"
+
+    @property
+    def n_unknowns(self) -> int:
+        """Size of the flat state (host side, no tracing)."""
+        net = self.network
+        return net.n_nodes * net.dim + net.n_segments * ((1 if net.dim == 2 else 3) + net.dim)
 
     def initial_state(self) -> JointedState:
         net = self.network
@@ -91,7 +103,7 @@ class JointedModel(eqx.Module):
         d = _unit(self.network, state.directions)
         return jax.lax.stop_gradient(jax.vmap(orthonormal_complement)(d))
 
-    def residual(self, state: JointedState, loads, frames) -> Float[Array, " R"]:
+    def residual(self, state: JointedState, control: Control, frames) -> Float[Array, " R"]:
         net = self.network
         a, b = net.segments[:, 0], net.segments[:, 1]
         r = state.positions
@@ -99,16 +111,30 @@ class JointedModel(eqx.Module):
         chord = r[b] - r[a]
         length_eq = (chord - net.lengths[:, None] * d) / net.lengths[:, None]
         m = joint_moments(state, net)
+        C = control.load_factor * net.couples
+        tip = (net.leaving_segment == net.n_segments).reshape((-1,) + (1,) * (C.ndim - 1))
+        m_start, m_end = m[a] - C[a], m[b] + jnp.where(tip, C, 0.0)[b]
         n = state.forces
         if net.dim == 2:
             torque = chord[:, 0] * n[:, 1] - chord[:, 1] * n[:, 0]
-            moment_eq = ((m[b] - m[a] + torque) * net.lengths / net.EI)[:, None]
+            moment_eq = ((m_end - m_start + torque) * net.lengths / net.EI)[:, None]
             seg = jnp.concatenate([length_eq, moment_eq], axis=1)
         else:
-            balance = m[b] - m[a] + jnp.cross(chord, n)
+            balance = m_end - m_start + jnp.cross(chord, n)
             moment_eq = jnp.einsum("sij,sj->si", frames, balance) * (net.lengths / net.EI)[:, None]
             norm_eq = 0.5 * (jnp.sum(state.directions**2, axis=1) - 1.0)
             seg = jnp.concatenate([length_eq, moment_eq, norm_eq[:, None]], axis=1)
-        imbalance = net_nodal_force(n, net, loads)
-        support = _support_rows(r, imbalance, net)
+        imbalance = net_nodal_force(n, net, control.load_factor * net.loads)
+        support = support_rows(r, imbalance, net, control)
         return jnp.concatenate([seg.ravel(), support.ravel()])
+
+    def tangents(self, state: JointedState) -> Array:
+        """Node tangents [N, d]: the normalised mean of the bar directions meeting there."""
+        net = self.network
+        d = _unit(net, state.directions)
+        summed = jax.ops.segment_sum(jnp.concatenate([d, d]), jnp.concatenate([net.segments[:, 0], net.segments[:, 1]]),
+                                     net.n_nodes)
+        return summed / jnp.linalg.norm(summed, axis=-1, keepdims=True)
+
+    def node_moments(self, state: JointedState) -> Array:
+        return joint_moments(state, self.network)

@@ -1,38 +1,54 @@
-"""Linear-algebra back ends for Newton on large, sparse square systems F: R^n -> R^n.
+"""Linear solvers for the Newton systems J Δx = b of socbjax, as ``lineax`` solvers.
 
-Both solvers answer the same question at a point x: X = J^{-1} rhs (or J^{-T} rhs) with
-J = dF/dx(x) [n, n], rhs [n, k] (or [n]), together with sign(det J) (+1., -1., 0. when
-singular) that continuation uses to detect critical points.  Both work inside ``jax.jit``,
-``lax.while_loop`` and ``jax.vmap``, and as arguments of ``eqx.filter_jit`` (they hold no
-array leaves, only static host data).
+Both solvers act on a square operator J [n, n] over flat vectors [n] and assemble it from
+matrix–vector products with ``seeds`` (:meth:`seeds`, :meth:`from_products`), so that one
+batched product serves a whole Jacobian.  Every ``compute`` also returns sign(det J)
+(+1, −1, or 0 when singular) in ``stats["sign"]``: load and path continuation use it to
+detect critical points.  Both work inside ``jax.jit``, ``lax.while_loop``, ``lax.cond`` and
+``jax.vmap``, and transpose (``solver.transpose``) for reverse-mode implicit derivatives.
 
-* :class:`DenseJacobianSolver`: ``jax.jacfwd`` + dense LU (O(n^2) memory, O(n^3) time).
-* :class:`SparseJacobianSolver`: the sparsity pattern of J is found once on the host
-  (:meth:`~SparseJacobianSolver.prepare`) by dense probing at two random points, its
-  columns are coloured so that no two columns of one colour share a row, and then every
-  Jacobian costs one batched JVP over the ``n_colors`` seed vectors (Curtis-Powell-Reid
-  compression).  The factorisation is SciPy's SuperLU, reached by ``jax.pure_callback``.
-  No gradients flow through the callback; ``transpose=True`` serves adjoint solves.
+* :class:`DenseLU` — J from n products with the unit vectors (``jax.jacfwd`` in effect),
+  LAPACK LU (O(n²) memory, O(n³) time).
+* :class:`ColouredSparseLU` — J's sparsity pattern is fixed on the host (from the network
+  graph, :mod:`socbjax._sparsity`, or by probing, :func:`sparsity_pattern`); its columns are
+  coloured so that no two columns of one colour share a row, and J costs one batched product
+  over the ``n_colors`` seeds (Curtis–Powell–Reid).  The factorisation is SciPy's SuperLU,
+  reached by ``jax.pure_callback``; several right-hand sides (``jax.vmap`` over the vector)
+  share one factorisation.
+* :class:`Bordered` — the bordered system [[J, c], [aᵀ, b]] [Δx; Δp] = [r; h] of path
+  following (J from an inner solver, the border column c = ∂F/∂p from the same batched
+  product, the row (a, b) passed as ``options["border"]``), solved by block elimination with
+  one factorisation of J; also returns J⁻¹c (the path tangent) in ``stats["tangent"]``.
 """
 
 from __future__ import annotations
 
 import functools
 import hashlib
-from collections.abc import Callable
 
 import equinox as eqx
+import equinox.internal as eqxi
 import jax
 import jax.numpy as jnp
+import lineax as lx
 import numpy as np
 import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 from jax import Array
 
-__all__ = ["SPARSE_THRESHOLD", "DenseJacobianSolver", "SparseJacobianSolver", "color_columns", "jacobian_solver",
-           "sparsity_pattern"]
+__all__ = ["SPARSE_THRESHOLD", "DenseLU", "ColouredSparseLU", "Bordered", "color_columns", "sparsity_pattern",
+           "solver_kind"]
 
 SPARSE_THRESHOLD = 1500  # "auto" picks the sparse solver above this many unknowns
+
+
+def solver_kind(kind: str, n: int) -> str:
+    """``"dense"`` or ``"sparse"`` for ``kind`` in ("dense", "sparse", "auto") and n unknowns."""
+    if kind not in ("dense", "sparse", "auto"):
+        raise ValueError(f"linear_solver must be 'dense', 'sparse' or 'auto', got {kind!r}")
+    if kind == "auto":
+        return "sparse" if n > SPARSE_THRESHOLD else "dense"
+    return kind
 
 
 class _Frozen:
@@ -56,39 +72,84 @@ class _Frozen:
         return f"_Frozen(shape={self.a.shape}, dtype={self.a.dtype})"
 
 
+def _check_operator(operator: lx.AbstractLinearOperator) -> int:
+    structure = operator.in_structure()
+    if not isinstance(structure, jax.ShapeDtypeStruct) or len(structure.shape) != 1:
+        raise ValueError(f"socbjax linear solvers act on flat vectors [n]; got the structure {structure}")
+    if operator.out_structure().shape != structure.shape:
+        raise ValueError("socbjax linear solvers need a square operator")
+    return structure.shape[0]
+
+
+class _SeededSolver(lx.AbstractLinearSolver):
+    """A solver that assembles J from products J·seedₖ (rows of :meth:`seeds`).
+
+    ``factor(matvec, n, dtype, options)`` is ``init`` for a plain linear function (the
+    linearisation of a residual): the root finder and the implicit adjoint call it directly,
+    without wrapping the function into a lineax operator (whose closure conversion does not
+    survive ``jax.shard_map``)."""
+
+    def seeds(self, n: int, dtype) -> Array:
+        raise NotImplementedError
+
+    def from_products(self, products: Array, n: int):
+        raise NotImplementedError
+
+    def factor(self, matvec, n: int, dtype, options):
+        return self.from_products(jax.vmap(matvec)(self.seeds(n, dtype)), n)
+
+    def init(self, operator, options):
+        n = _check_operator(operator)
+        return self.factor(operator.mv, n, operator.in_structure().dtype, options)
+
+    def conj(self, state, options):
+        return state, options  # real matrices
+
+    def assume_full_rank(self):
+        return True
+
+    def allow_dependent_columns(self, operator):
+        return False
+
+    def allow_dependent_rows(self, operator):
+        return False
+
+
 # ----------------------------------------------------------------------------- dense
-def _lu_sign(lu: Array, piv: Array) -> Array:
+def lu_sign(lu: Array, piv: Array) -> Array:
     """sign(det) from LAPACK-style ``lu`` [n, n] and row-swap pivots ``piv`` [n]; 0 if singular."""
     swaps = jnp.sum(piv != jnp.arange(piv.shape[-1]), axis=-1)
     sign = jnp.prod(jnp.sign(jnp.diagonal(lu, axis1=-2, axis2=-1)), axis=-1) * (1 - 2 * (swaps % 2))
     return jnp.where(jnp.isfinite(sign), sign, 0).astype(lu.dtype)
 
 
-class DenseJacobianSolver(eqx.Module):
-    """J = ``jax.jacfwd(fn)(x)`` and ``jax.scipy.linalg.lu_factor`` / ``lu_solve``."""
+class DenseLU(_SeededSolver):
+    """Dense LU (``jax.scipy.linalg.lu_factor``) of J assembled from n unit-vector products."""
 
-    def prepare(self, fn: Callable, x_example) -> DenseJacobianSolver:
-        """Nothing to precompute; returns self."""
-        return self
+    def seeds(self, n: int, dtype) -> Array:
+        return jnp.eye(n, dtype=dtype)
 
-    def solve(self, fn: Callable, x: Array, rhs: Array, *, transpose: bool = False) -> tuple[Array, Array]:
-        """X = J^{-1} rhs (J^{-T} rhs if ``transpose``), J = dfn/dx(x) [n, n], rhs [n, k] or [n].
+    def from_products(self, products: Array, n: int):
+        lu, piv = jax.scipy.linalg.lu_factor(products.T)  # products[k] = J e_k = column k
+        return lu, piv, lu_sign(lu, piv), eqxi.Static(False)
 
-        Returns (X like rhs, sign(det J) as a float scalar: +1, -1, or 0 when singular).
-        """
-        lu, piv = jax.scipy.linalg.lu_factor(jax.jacfwd(fn)(x))
-        X = jax.scipy.linalg.lu_solve((lu, piv), rhs.astype(lu.dtype), trans=1 if transpose else 0)
-        return X, _lu_sign(lu, piv)
+    def compute(self, state, vector, options):
+        lu, piv, sign, transpose = state
+        x = jax.scipy.linalg.lu_solve((lu, piv), vector.astype(lu.dtype), trans=1 if transpose.value else 0)
+        return x, lx.RESULTS.successful, {"sign": sign}
+
+    def transpose(self, state, options):
+        lu, piv, sign, transpose = state
+        return (lu, piv, sign, eqxi.Static(not transpose.value)), options
 
 
 # ------------------------------------------------------------------- sparsity, colours
-def sparsity_pattern(fn: Callable, x_example, *, seed: int = 0, chunk: int = 256) -> tuple[np.ndarray, np.ndarray]:
-    """Exact nonzero pattern of J = dfn/dx, host side.
+def sparsity_pattern(fn, x_example, *, seed: int = 0, chunk: int = 256) -> tuple[np.ndarray, np.ndarray]:
+    """Exact nonzero pattern of J = dfn/dx, host side, by probing.
 
     J is probed column by column (``chunk`` unit vectors per batched JVP, one compilation)
     at two points x_example + N(0, 1) noise; an entry belongs to the pattern if it is
-    nonzero (or NaN) at either point.  Returns (rows, cols), int32 arrays [nnz] in CSC order
-    (sorted by column, then row).
+    nonzero (or NaN) at either point.  Returns (rows, cols), int32 arrays [nnz] in CSC order.
     """
     x0 = np.asarray(x_example)
     n, dtype = x0.size, x0.dtype
@@ -113,11 +174,9 @@ def sparsity_pattern(fn: Callable, x_example, *, seed: int = 0, chunk: int = 256
 def color_columns(rows: np.ndarray, cols: np.ndarray, n: int, *, seed: int = 0) -> np.ndarray:
     """Greedy colouring of the columns of an n x n pattern; columns sharing a row differ.
 
-    Largest-first order: decreasing degree in the column-intersection graph (pattern of
-    A^T A), ties broken by a seeded random permutation.  Computed in vectorised rounds
-    (Jones-Plassmann): a column takes the smallest colour unused by its neighbours once all
-    its higher-priority neighbours have one, which gives exactly the sequential greedy
-    colouring in that order.  Returns colours int32 [n] in 0 .. n_colors-1.
+    Largest-first order (decreasing degree in the column-intersection graph AᵀA, ties by a
+    seeded permutation), computed in vectorised Jones–Plassmann rounds, which gives exactly
+    the sequential greedy colouring in that order.  Returns colours int32 [n].
     """
     A = sp.csc_matrix((np.ones(rows.size, np.int32), (rows, cols)), shape=(n, n))
     G = (A.T @ A).tocoo()
@@ -148,66 +207,72 @@ def _perm_sign(p: np.ndarray) -> int:
     n = p.size
     label, jump = np.arange(n), np.asarray(p, np.int64)
     for _ in range(int(np.ceil(np.log2(max(n, 2))))):
-        label = np.minimum(label, label[jump])  # min over i, p(i), ..., p^(2^k - 1)(i)
+        label = np.minimum(label, label[jump])
         jump = jump[jump]
     cycles = np.count_nonzero(label == np.arange(n))
     return 1 - 2 * ((n - cycles) % 2)
 
 
-def _splu_host(vals, rhs, *, indices, indptr, n, transpose, permc_spec):
-    """Host side of the sparse solve: CSC values [nnz], rhs [n, k] -> (X [n, k], sign ())."""
-    vals, rhs = np.asarray(vals), np.asarray(rhs)
-    failed = np.full(rhs.shape, np.nan, rhs.dtype), np.zeros((), rhs.dtype)
+def _factor_solve(vals, rhs, *, indices, indptr, n, transpose, permc_spec):
+    """One SuperLU factorisation of the CSC matrix ``vals`` [nnz], solving rhs [k, n]."""
     if not np.all(np.isfinite(vals)):
-        return failed
+        return np.full(rhs.shape, np.nan), 0.0
     try:
         lu = spla.splu(sp.csc_matrix((vals, indices, indptr), shape=(n, n)), permc_spec=permc_spec)
-        X = lu.solve(np.array(rhs, order="F"), trans="T" if transpose else "N")
+        X = lu.solve(np.array(rhs.T, order="F"), trans="T" if transpose else "N").T
         d = lu.U.diagonal()
         sign = 0 if np.any(d == 0) else (1 - 2 * (np.count_nonzero(d < 0) % 2))
         sign *= _perm_sign(lu.perm_r) * _perm_sign(lu.perm_c)
     except Exception:  # noqa: BLE001  (singular / failed factorisation: never raise in a callback)
-        return failed
-    return np.asarray(X, rhs.dtype).reshape(rhs.shape), np.asarray(sign, rhs.dtype)
+        return np.full(rhs.shape, np.nan), 0.0
+    return X, float(sign)
 
 
-class SparseJacobianSolver(eqx.Module):
-    """Colour-compressed forward-mode Jacobian + SuperLU (``scipy.sparse.linalg.splu``).
+def _splu_host(vals, rhs, **kw):
+    """Host side of the sparse solve, batched: vals [..., nnz] (size-1 leading axes where
+    unbatched) and rhs [..., n] broadcast against each other; every distinct value set is
+    factored once.  Returns (X like the broadcast rhs, sign [...])."""
+    vals, rhs = np.asarray(vals), np.asarray(rhs)
+    lead = np.broadcast_shapes(vals.shape[:-1], rhs.shape[:-1])
+    vals = vals.reshape((1,) * (len(lead) - vals.ndim + 1) + vals.shape)
+    rhs = np.broadcast_to(rhs, lead + rhs.shape[-1:])
+    X, signs = np.empty(rhs.shape, rhs.dtype), np.empty(lead, rhs.dtype)
+    for index in np.ndindex(vals.shape[:-1]):
+        where = tuple(slice(None) if vals.shape[k] == 1 else i for k, i in enumerate(index))
+        block = rhs[where]
+        x, sign = _factor_solve(vals[index], block.reshape(-1, block.shape[-1]), **kw)
+        X[where], signs[where] = x.reshape(block.shape), sign
+    return X, signs
 
-    Build unprepared (``SparseJacobianSolver()``) and call :meth:`prepare` host side,
-    outside jit; the prepared solver holds only static host data: the pattern ``rows``,
-    ``cols`` [nnz] (CSC order) with ``indptr`` [n+1], column ``colors`` [n] and the flat
-    ``gather`` index [nnz] of each nonzero in the compressed Jacobian [n_colors, n].
-    ``permc_spec`` is SuperLU's column ordering: minimum degree on the pattern of A^T + A
-    suits the (nearly) structurally symmetric tree-of-blocks Jacobians (no fill on a tree;
-    at n = 10,000 it factored ~2x faster than COLAMD, see benchmarks/linear_timing.py).
+
+class ColouredSparseLU(_SeededSolver):
+    """Colour-compressed Jacobian + SuperLU (``scipy.sparse.linalg.splu``).
+
+    Built by :meth:`from_pattern` (or :func:`socbjax._sparsity.prepare_sparse_solver`)
+    outside jit; holds only static host data: the pattern ``rows``, ``cols`` [nnz] (CSC
+    order) with ``indptr`` [n+1], column ``colors`` [n] and the flat ``gather`` index [nnz]
+    of each nonzero in the compressed Jacobian [n_colors, n].  ``permc_spec`` is SuperLU's
+    column ordering (COLAMD by default: on SOCB network Jacobians at straight states the
+    symmetric minimum-degree ordering factored ~100× slower).
     """
 
-    n: int = eqx.field(static=True, default=-1)
-    n_colors: int = eqx.field(static=True, default=0)
-    rows: _Frozen | None = eqx.field(static=True, default=None)
-    cols: _Frozen | None = eqx.field(static=True, default=None)
-    indptr: _Frozen | None = eqx.field(static=True, default=None)
-    colors: _Frozen | None = eqx.field(static=True, default=None)
-    gather: _Frozen | None = eqx.field(static=True, default=None)
-    permc_spec: str = eqx.field(static=True, default="MMD_AT_PLUS_A")
+    n: int = eqx.field(static=True)
+    n_colors: int = eqx.field(static=True)
+    rows: _Frozen = eqx.field(static=True)
+    cols: _Frozen = eqx.field(static=True)
+    indptr: _Frozen = eqx.field(static=True)
+    colors: _Frozen = eqx.field(static=True)
+    gather: _Frozen = eqx.field(static=True)
+    permc_spec: str = eqx.field(static=True, default="COLAMD")
 
     @property
     def nnz(self) -> int:
-        return 0 if self.rows is None else int(self.rows.a.size)
-
-    def prepare(self, fn: Callable, x_example, *, seed: int = 0) -> SparseJacobianSolver:
-        """Detect the pattern of dfn/dx and colour its columns; returns a prepared copy.
-
-        ``fn`` maps x [n] -> [n]; its sparsity must not depend on captured parameter values.
-        """
-        rows, cols = sparsity_pattern(fn, x_example, seed=seed)
-        return self.from_pattern(rows, cols, int(np.size(x_example)), seed=seed, permc_spec=self.permc_spec)
+        return int(self.rows.a.size)
 
     @classmethod
-    def from_pattern(cls, rows, cols, n: int, *, seed: int = 0, permc_spec: str = "MMD_AT_PLUS_A"):
-        """A prepared solver for a known pattern: ``rows``, ``cols`` [nnz] in CSC order (sorted
-        by column, then row, no duplicates); entries outside it are taken as zero."""
+    def from_pattern(cls, rows, cols, n: int, *, seed: int = 0, permc_spec: str = "COLAMD") -> ColouredSparseLU:
+        """A solver for a known pattern: ``rows``, ``cols`` [nnz] in CSC order (sorted by
+        column, then row, no duplicates); entries outside it are taken as zero."""
         rows, cols = np.asarray(rows, np.int32), np.asarray(cols, np.int32)
         colors = color_columns(rows, cols, n, seed=seed)
         indptr = np.concatenate([[0], np.cumsum(np.bincount(cols, minlength=n))]).astype(np.int32)
@@ -215,42 +280,89 @@ class SparseJacobianSolver(eqx.Module):
         return cls(n=n, n_colors=int(colors.max()) + 1 if n else 0, rows=_Frozen(rows), cols=_Frozen(cols),
                    indptr=_Frozen(indptr), colors=_Frozen(colors), gather=_Frozen(gather), permc_spec=permc_spec)
 
-    def _check(self, x: Array) -> None:
-        if self.rows is None:
-            raise ValueError("SparseJacobianSolver: call .prepare(fn, x_example) (outside jit) before solve")
-        if x.shape != (self.n,):
-            raise ValueError(f"SparseJacobianSolver prepared for x of shape ({self.n},), got {x.shape}")
+    @classmethod
+    def probe(cls, fn, x_example, *, seed: int = 0, permc_spec: str = "COLAMD") -> ColouredSparseLU:
+        """A solver for dfn/dx, its pattern found by probing (:func:`sparsity_pattern`)."""
+        rows, cols = sparsity_pattern(fn, x_example, seed=seed)
+        return cls.from_pattern(rows, cols, int(np.size(x_example)), seed=seed, permc_spec=permc_spec)
 
-    def jacobian_values(self, fn: Callable, x: Array) -> Array:
-        """Nonzeros of J(x) [nnz] in CSC order, from one vmapped JVP over the colour seeds."""
-        self._check(x)
-        seeds = (jnp.arange(self.n_colors)[:, None] == jnp.asarray(self.colors.a)[None, :]).astype(x.dtype)
-        compressed = jax.vmap(lambda s: jax.jvp(fn, (x,), (s,))[1])(seeds)  # [n_colors, n]
-        return compressed.reshape(-1)[jnp.asarray(self.gather.a)]
+    def seeds(self, n: int, dtype) -> Array:
+        if n != self.n:
+            raise ValueError(f"ColouredSparseLU prepared for {self.n} unknowns, used with {n}")
+        return (jnp.arange(self.n_colors)[:, None] == jnp.asarray(self.colors.a)[None, :]).astype(dtype)
 
-    def solve_values(self, vals: Array, rhs: Array, *, transpose: bool = False) -> tuple[Array, Array]:
-        """Factor the CSC matrix with nonzeros ``vals`` [nnz] and solve rhs [n, k] (or [n])."""
-        dtype = jnp.result_type(vals.dtype, rhs.dtype)
+    def from_products(self, products: Array, n: int):
+        return products.reshape(-1)[jnp.asarray(self.gather.a)], eqxi.Static(False)
+
+    def compute(self, state, vector, options):
+        values, transpose = state
+        dtype = jnp.result_type(values.dtype, vector.dtype)
         host = functools.partial(_splu_host, indices=self.rows.a, indptr=self.indptr.a, n=self.n,
-                                 transpose=bool(transpose), permc_spec=self.permc_spec)
-        out = (jax.ShapeDtypeStruct(rhs.shape, dtype), jax.ShapeDtypeStruct((), dtype))
-        return jax.pure_callback(host, out, vals.astype(dtype), rhs.astype(dtype), vmap_method="sequential")
+                                 transpose=bool(transpose.value), permc_spec=self.permc_spec)
+        out = (jax.ShapeDtypeStruct(vector.shape, dtype), jax.ShapeDtypeStruct((), dtype))
+        x, sign = jax.pure_callback(host, out, values.astype(dtype), vector.astype(dtype), vmap_method="expand_dims")
+        return x, lx.RESULTS.successful, {"sign": sign}
 
-    def solve(self, fn: Callable, x: Array, rhs: Array, *, transpose: bool = False) -> tuple[Array, Array]:
-        """X = J^{-1} rhs (J^{-T} rhs if ``transpose``), J = dfn/dx(x), rhs [n, k] or [n].
+    def transpose(self, state, options):
+        values, transpose = state
+        return (values, eqxi.Static(not transpose.value)), options
 
-        Returns (X like rhs, sign(det J) float scalar); X is NaN and sign 0 when J is singular
-        or non-finite.
-        """
-        return self.solve_values(self.jacobian_values(fn, x), rhs, transpose=transpose)
+    def values(self, fn, x: Array) -> Array:
+        """Nonzeros of dfn/dx at x [nnz] in CSC order, from one batched JVP."""
+        seeds = self.seeds(x.shape[0], x.dtype)
+        return self.from_products(jax.vmap(lambda s: jax.jvp(fn, (x,), (s,))[1])(seeds), x.shape[0])[0]
 
 
-def jacobian_solver(kind: str, n: int) -> DenseJacobianSolver | SparseJacobianSolver:
-    """``"dense"``, ``"sparse"`` or ``"auto"`` (sparse when n > SPARSE_THRESHOLD); unprepared."""
-    if kind == "auto":
-        kind = "sparse" if n > SPARSE_THRESHOLD else "dense"
-    if kind == "dense":
-        return DenseJacobianSolver()
-    if kind == "sparse":
-        return SparseJacobianSolver()
-    raise ValueError(f"unknown Jacobian solver kind {kind!r}; use 'dense', 'sparse' or 'auto'")
+# ------------------------------------------------------------------------- bordered
+class Bordered(lx.AbstractLinearSolver):
+    """The bordered system of path following, [[J, c], [aᵀ, b]] over flat [x; p] [n + 1].
+
+    ``inner`` (:class:`DenseLU` or :class:`ColouredSparseLU`) factors J; J and the border
+    column c = J_aug[:n, n] come from one batched product of the operator with the inner
+    solver's seeds and the unit vector of p.  The border row (a [n], b) must be given as
+    ``options["border"]`` (the constraint of the parametrisation is affine and known to the
+    caller; it cannot be read off a column-compressed product).  Block elimination:
+    J [u, v] = [r, c] (one factorisation, two right-hand sides), Δp = (h − a·u)/(b − a·v),
+    Δx = u − v Δp.  ``stats``: ``sign`` = sign(det J) and ``tangent`` = J⁻¹c.
+    """
+
+    inner: _SeededSolver
+
+    def init(self, operator, options):
+        return self.factor(operator.mv, _check_operator(operator), operator.in_structure().dtype, options)
+
+    def factor(self, matvec, m: int, dtype, options):
+        """The state for the bordered operator ``matvec`` over [x; p] (m = n + 1)."""
+        if "border" not in options:
+            raise ValueError("Bordered needs options={'border': (a, b)}, the constraint row of the parametrisation")
+        n = m - 1
+        seeds = jnp.pad(self.inner.seeds(n, dtype), ((0, 0), (0, 1)))
+        seeds = jnp.concatenate([seeds, jnp.zeros((1, m), dtype).at[0, n].set(1.0)])
+        products = jax.vmap(matvec)(seeds)
+        inner_state = self.inner.from_products(products[:-1, :n], n)
+        a, b = options["border"]
+        return inner_state, products[-1, :n], a, b
+
+    def compute(self, state, vector, options):
+        inner_state, c, a, b = state
+        r, h = vector[:-1], vector[-1]
+        uv, _, stats = jax.vmap(lambda rhs: self.inner.compute(inner_state, rhs, options))(jnp.stack([r, c]))
+        u, v = uv[0], uv[1]
+        dp = (h - a @ u) / (b - a @ v)
+        dx = u - v * dp
+        return jnp.concatenate([dx, dp[None]]), lx.RESULTS.successful, {"sign": stats["sign"][0], "tangent": v}
+
+    def transpose(self, state, options):
+        raise NotImplementedError("Bordered is a forward solver of path correctors; it is never transposed")
+
+    def conj(self, state, options):
+        return state, options
+
+    def assume_full_rank(self):
+        return True
+
+    def allow_dependent_columns(self, operator):
+        return False
+
+    def allow_dependent_rows(self, operator):
+        return False

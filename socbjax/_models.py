@@ -31,18 +31,17 @@ them and is passed to :func:`socbjax.compress` (``model.network`` then carries n
 
 from __future__ import annotations
 
-import equinox as eqx
 import jax.numpy as jnp
 import numpy as np
 
 from ._builders import column
-from ._compress import _gap, probe_network
-from ._perturbation import _strands
+from ._compress import probe_gap, probe_network
+from ._perturbation import strand_segments
 from ._dendritic import dendritic_outcrop, unit_dendritic_mesh
 from ._network import Network
 from ._parameters import Parameter
 
-__all__ = ["FitModel", "ColumnModel", "UnitMeshModel", "OutcropModel", "make_fit_model", "FIT_MODELS"]
+__all__ = ["FitModel", "ColumnModel", "UnitMeshModel", "OutcropModel", "make_fit_model", "FIT_MODELS", "branch_orders"]
 
 _ACTIN_EI = 0.071
 
@@ -66,7 +65,7 @@ class FitModel:
     @property
     def gap(self) -> float:
         """Largest probe travel the model can reach (µm): the probe–surface distance."""
-        return _gap(self.base)
+        return probe_gap(self.base)
 
     def describe(self) -> str:
         lines = [f"{self.name}: {self.base.n_nodes} nodes, {self.base.n_segments} segments, {self.base.n_junctions} junctions"]
@@ -97,11 +96,7 @@ class FitModel:
             loads = jnp.zeros_like(self.base.loads)
         else:  # the builder's loads, scaled with EI so that forces scale exactly with EI
             loads = self.base.loads * (jnp.mean(EI) / jnp.mean(jnp.asarray(self.base.EI)))
-        return eqx.tree_at(
-            lambda n: (n.positions, n.tangents, n.lengths, n.EI, n.loads),
-            self.base,
-            (positions, tangents, lengths, EI, loads),
-        )
+        return self.base.replace(positions=positions, tangents=tangents, lengths=lengths, EI=EI, loads=loads)
 
 
 class ColumnModel(FitModel):
@@ -164,7 +159,7 @@ class UnitMeshModel(FitModel):
         return positions, tangents, lengths
 
 
-def _branch_orders(network: Network) -> np.ndarray:
+def branch_orders(network: Network) -> np.ndarray:
     """Branching order of every strand [n_strands]: 0 for strands that start at no junction,
     1 + the mother strand's order for a daughter."""
     strand, seg = np.asarray(network.strand), np.asarray(network.segments)
@@ -195,12 +190,12 @@ class OutcropModel(FitModel):
         builder = {"generations": 4, "gap": 3.0, "dim": 3, **builder}
         builder.pop("EI", None)
         self.base = dendritic_outcrop(EI=_ACTIN_EI, **builder)
-        order = _branch_orders(self.base)[np.asarray(self.base.strand)]
+        order = branch_orders(self.base)[np.asarray(self.base.strand)]
         self.groups = {f"EI_gen{k}": order == k for k in range(order.max() + 1)}
         self.parameters = {"EI": _ei("EI", "bending stiffness of all filaments")}
         self.parameters.update({k: _ei(k, f"bending stiffness of branching order {k[6:]}") for k in self.groups})
         self.parameters["perturbation"] = _PERTURBATION
-        self.n_strands = len(_strands(self.base))
+        self.n_strands = len(strand_segments(self.base))
 
 
 FIT_MODELS = {"column": ColumnModel, "unit-mesh": UnitMeshModel, "outcrop": OutcropModel}

@@ -1,260 +1,416 @@
-"""Path following in one scalar control parameter: natural-parameter (displacement control)
-and pseudo-arclength (Keller/Riks) continuation, with cut-back, stability and event data.
+"""The one path engine: :func:`follow_path` (continuation in one scalar control parameter).
 
-The equilibrium path of ``F(x, p) = 0`` (``x`` the flat state, ``p ∈ [0, 1]`` the phase
-parameter; the caller maps p to a probe displacement or a load factor) is followed from a
-converged ``(x₀, 0)`` to ``p = 1``.
+The equilibrium path of ``F(x, p) = 0`` (``x`` the flat state, ``p ∈ [0, 1]`` the path
+parameter; :class:`PathProblem` maps p to the controls of the residual: a load factor for the
+load ramp of :func:`socbjax.solve`, a probe displacement for :func:`socbjax.compress`) is
+followed from a converged ``(x₀, p₀)`` to ``p = 1``.  Pluggable pieces:
 
-* **Predictor.**  The unit path tangent τ = (ẋ, ṗ) from J ẋ = −F_p ṗ (J = ∂F/∂x, F_p = ∂F/∂p),
-  normalised in the weighted norm ‖(δx, δp)‖² = mean over nodes of (|δr|² + ℓ²|δdirector|²)
-  + (p_scale δp)² (ℓ: mean segment length)
-  (so the step ``ds`` is in µm) and oriented like the previous step; the predictor is
-  (x, p) + ds τ, shortened to land exactly on p = 1.  Both methods use it: near a straight
-  strand's buckling the shape changes like √u, so a step in u alone would be a poor guess.
-* **Corrector.**  Newton on the bordered system [F(x, p); g(x, p)] = 0 with g = p − p_target
-  (displacement control at the predicted p, and the final landing on p = 1) or
-  g = ⟨τ, (x, p) − predictor⟩
-  (pseudo-arclength: the hyperplane through the predictor normal to τ).  Each iteration
-  solves J [a c] = [−F, F_p] with one factorisation of the pluggable Jacobian solver
-  (dense or sparse, see :mod:`socbjax._linear`) and eliminates the border (the bordering
-  algorithm), so the sparse solver never sees the dense border row.
-* **Acceptance.**  A step is accepted only if Newton converged, the corrector moved the
-  state by less than ``max_corrector_ratio`` of the step, and the tangent turned by less than
-  ``max_turn``; under displacement control also only if sign(det J) did not change (a fold
-  in the control parameter cannot be crossed at fixed displacement: the run stops with
-  ``Status.CRITICAL_POINT``; use ``method="arclength"``).  Rejected steps are halved; quick
-  convergence grows the step by 1.5×.  Nothing unconverged is ever recorded.
+* the **parametrisation** — :class:`NaturalParameter` (the corrector holds p at its
+  predicted value: load ramps and displacement control; a fold in p stops the run with
+  ``RESULTS.fold``) or :class:`PseudoArclength` (the corrector moves in the hyperplane
+  through the predictor normal to the path tangent, so folds and snap-backs are followed);
+* the **step controller** (:class:`PathSettings`): step sizes, growth, cut-back, budgets and
+  the acceptance tests below;
+* the **recorder** (:class:`NoRecorder`, :class:`StepRecorder`, ``socbjax._sampled``'s
+  sample recorder): what is kept of each accepted step, in preallocated buffers.
 
-Every accepted step writes (x, p, sign det J, sign ṗ, Newton iterations) into preallocated
-buffers, so a whole phase is one compiled ``lax.while_loop``.  The loop may stop after a
-given number of accepted steps (``chunk``) and be resumed from its carry: that is how the
-driver shows progress and writes checkpoints; the result is identical to an unchunked run.
+Each attempt: the unit tangent τ = (ẋ, ṗ) (from J ẋ = −F_p ṗ, normalised in the weighted
+norm ‖(δx, δp)‖²_w = Σ wᵢ δxᵢ² + w_p δp²) gives the predictor y + h τ, shortened to land on
+p = 1; :class:`socbjax.DampedNewton` corrects it on the bordered system [F; g] = 0 (the
+:class:`socbjax._linear.Bordered` solver: one factorisation of J per Newton step, which also
+yields sign(det J) and the next tangent).  A step is accepted only if Newton converged, the
+corrector moved the state by at most ``max_corrector_ratio`` of the predicted increment
+(in the ``check`` norm), the tangent turned by at most ``max_turn`` and det J ≠ 0; under
+natural-parameter control also only if sign(det J) did not change (a critical point: the
+run stops with ``RESULTS.critical_point`` when the step shrinks below its minimum) and the
+path did not turn back in p (``RESULTS.fold``).  Rejected steps are halved; quick
+convergence grows the next step.  Nothing unconverged is ever recorded.
+
+The whole run is one ``lax.while_loop`` over a typed :class:`PathState`; the loop may stop
+after a given number of accepted steps and be resumed from its state (progress and
+checkpoints of :func:`socbjax.compress`); the result is identical to an unchunked run.
 """
 
 from __future__ import annotations
 
+import dataclasses
+
 import equinox as eqx
 import jax
 import jax.numpy as jnp
+import numpy as np
+from jax.flatten_util import ravel_pytree
 from jaxtyping import Array
 
-from ._newton import Status
+from ._linear import Bordered
+from ._residual import Control
+from ._root import DampedNewton, newton_result, root_find
+from ._solution import RESULTS
 
-__all__ = ["PathSettings", "path_start", "path_run"]
+__all__ = ["PathSettings", "NaturalParameter", "PseudoArclength", "PathProblem", "PathState", "NoRecorder",
+           "StepRecorder", "follow_path", "start_path", "parametrisation"]
 
-_RUNNING = -1
-METHODS = ("displacement", "arclength")
+METHODS = ("displacement", "load", "natural", "arclength")
 
 
 class PathSettings(eqx.Module):
-    """Step control of path following (steps in µm of probe travel or of arclength).
+    """Numerics of path following (used by :func:`socbjax.solve` and :func:`socbjax.compress`).
 
-    method : "displacement" (natural parameter) or "arclength" (pseudo-arclength).
-    initial_step, min_step, max_step : step sizes (µm).
-    max_steps : buffer capacity: accepted steps per phase (static).
-    max_attempts : cap on attempted steps per phase (accepted + rejected).
-    fast_iterations : a step converging within this many Newton iterations grows the next.
-    max_corrector_ratio : reject when the corrector moved (x, p) by more than this × step.
-    max_turn : reject when the path tangent turned by more than this (rad) in one step.
-    atol : Newton tolerance on ‖F‖_∞ (dimensionless residual).
-    max_iterations, max_backtracks : Newton iteration and step-halving caps.
+    Every field left ``None`` takes the entry point's default (first value: ``solve``'s load
+    ramp, step in units of the load factor; second: ``compress``, steps in µm of probe travel
+    or of arclength):
+
+    method : "displacement"/"load"/"natural" (natural parameter) or "arclength" (pseudo-arclength).
+    initial_step, min_step, max_step : 0.25, 1e-6, 1.0 | 0.02, 1e-7, 0.05 µm.
+    max_steps : accepted steps (compress: the capacity of the step buffers): 500 | 1000.
+    max_attempts : attempted steps (accepted + rejected): 5000 | 5000.
+    grow, fast_iterations : a step converging within ``fast_iterations`` Newton iterations
+        multiplies the next by ``grow``: 2.0, 5 | 1.5, 4.
+    max_corrector_ratio : reject when the corrector moved farther than this fraction of the
+        predicted increment (the path bends too sharply for the step): 0.5 | 0.5.
+    max_turn : reject when the tangent turned by more than this (rad) in one step: π | 0.6.
+    corrector_floor : absolute floor of that test, relative to 1 + ‖x‖: 1e-9 | 1e-12.
+    detect_critical_points : reject natural-parameter steps across which sign(det J)
+        changes (the path crossed a critical point or jumped branch): True.
+    atol : Newton tolerance on ‖F‖∞ (dimensionless): ``socbjax.default_atol`` | 1e-10.
+    max_iterations, max_backtracks : Newton caps: 40, 16 | 25, 12.
+    linear_solver : "dense", "sparse" or "auto" (sparse above 1,500 unknowns): "auto".
+    quadrature_order : Gauss–Legendre points per SOCB segment (Eq. 7): 8.
     """
 
-    method: str = eqx.field(static=True, default="displacement")
-    initial_step: float = 0.02
-    min_step: float = 1e-7
-    max_step: float = 0.05
-    max_steps: int = eqx.field(static=True, default=1000)
-    max_attempts: int = 5000
-    fast_iterations: int = 4
-    max_corrector_ratio: float = 0.5
-    max_turn: float = 0.6
-    atol: float = 1e-10
-    max_iterations: int = 25
-    max_backtracks: int = 12
+    method: str | None = eqx.field(static=True, default=None)
+    initial_step: float | None = None
+    min_step: float | None = None
+    max_step: float | None = None
+    max_steps: int | None = eqx.field(static=True, default=None)
+    max_attempts: int | None = None
+    grow: float | None = None
+    fast_iterations: int | None = None
+    max_corrector_ratio: float | None = None
+    max_turn: float | None = None
+    corrector_floor: float | None = None
+    detect_critical_points: bool = eqx.field(static=True, default=True)
+    atol: float | None = None
+    max_iterations: int | None = None
+    max_backtracks: int | None = None
+    linear_solver: str = eqx.field(static=True, default="auto")
+    quadrature_order: int = eqx.field(static=True, default=8)
 
     def __check_init__(self):
-        if self.method not in METHODS:
+        if self.method is not None and self.method not in METHODS:
             raise ValueError(f"method must be one of {METHODS}, got {self.method!r}")
-        if not 0 < self.min_step <= self.initial_step <= self.max_step:
-            raise ValueError(
-                f"need 0 < min_step <= initial_step <= max_step (µm), got {self.min_step}, {self.initial_step}, {self.max_step}"
-            )
-        if self.max_steps < 1:
-            raise ValueError(f"max_steps must be at least 1, got {self.max_steps}")
+        if self.linear_solver not in ("dense", "sparse", "auto"):
+            raise ValueError(f"linear_solver must be 'dense', 'sparse' or 'auto', got {self.linear_solver!r}")
+        if isinstance(self.quadrature_order, bool) or not isinstance(self.quadrature_order, (int, np.integer)) \
+                or self.quadrature_order < 2:
+            raise ValueError(f"quadrature_order must be an integer >= 2, got {self.quadrature_order!r}")
+
+    def replace(self, **changes) -> PathSettings:
+        """A copy with some fields changed."""
+        return dataclasses.replace(self, **changes)
+
+    def filled(self, **defaults) -> PathSettings:
+        """A copy with every ``None`` field set from ``defaults``, checked."""
+        values = {f.name: getattr(self, f.name) for f in dataclasses.fields(self)}
+        values.update({k: v for k, v in defaults.items() if values.get(k) is None})
+        out = PathSettings(**values)
+        out.check()
+        return out
+
+    def check(self) -> None:
+        """Validate a filled settings object (concrete numbers only)."""
+        steps = [self.min_step, self.initial_step, self.max_step]
+        if any(isinstance(v, jax.core.Tracer) for v in steps):
+            return
+        if not all(np.isfinite(float(v)) for v in steps) or not 0 < float(steps[0]) <= float(steps[1]) <= float(steps[2]):
+            raise ValueError(f"need 0 < min_step <= initial_step <= max_step, got {steps[0]}, {steps[1]}, {steps[2]}")
+        for name in ("max_steps", "max_attempts", "max_iterations", "max_backtracks", "fast_iterations"):
+            value = getattr(self, name)
+            if not isinstance(value, jax.core.Tracer) and (isinstance(value, bool) or int(value) != value or value < 1):
+                raise ValueError(f"PathSettings.{name} must be a positive integer, got {value!r}")
+        for name in ("grow", "max_corrector_ratio", "max_turn", "atol", "corrector_floor"):
+            value = getattr(self, name)
+            if not isinstance(value, jax.core.Tracer) and not (np.isfinite(float(value)) and float(value) > 0):
+                raise ValueError(f"PathSettings.{name} must be a positive finite number, got {value!r}")
+
+    def traced(self) -> PathSettings:
+        """The numeric fields as arrays: ``eqx.filter_jit`` traces arrays but holds Python
+        numbers static, so new step sizes or tolerances would otherwise recompile."""
+        def leaf(v):
+            return v if isinstance(v, bool) or v is None else jnp.asarray(v)
+
+        return jax.tree_util.tree_map(leaf, self)
+
+    def newton(self, inner) -> DampedNewton:
+        """The corrector: :class:`DampedNewton` on the bordered system with ``inner``."""
+        return DampedNewton(atol=self.atol, max_iterations=self.max_iterations, max_backtracks=self.max_backtracks,
+                            linear_solver=Bordered(inner))
 
 
-def _inner(weights, a, b):
-    return jnp.sum(weights * a * b)
+LOAD_RAMP = dict(method="natural", initial_step=0.25, min_step=1e-6, max_step=1.0, max_steps=500, max_attempts=5000,
+                 grow=2.0, fast_iterations=5, max_corrector_ratio=0.5, max_turn=float(np.pi), corrector_floor=1e-9,
+                 max_iterations=40, max_backtracks=16)
+PROBE_PATH = dict(method="displacement", initial_step=0.02, min_step=1e-7, max_step=0.05, max_steps=1000,
+                  max_attempts=5000, grow=1.5, fast_iterations=4, max_corrector_ratio=0.5, max_turn=0.6,
+                  corrector_floor=1e-12, atol=1e-10, max_iterations=25, max_backtracks=12)
 
 
-def _tangent(c, weights, previous):
-    """Unit tangent (−c, 1)/‖·‖ oriented along ``previous`` (c = J⁻¹ F_p)."""
-    t = jnp.concatenate([-c, jnp.ones((1,), c.dtype)])
-    t = t / jnp.sqrt(_inner(weights, t, t))
-    return jnp.where(_inner(weights, t, previous) < 0, -t, t)
+# ----------------------------------------------------------------- parametrisations
+class NaturalParameter(eqx.Module):
+    """Natural-parameter continuation: the corrector fixes p at the predictor's value."""
+
+    passes_folds = False
+
+    def border(self, tau, weights):
+        """The constraint row (a [n], b): a·(x − x̂) + b (p − p̂) = 0."""
+        return jnp.zeros_like(tau[:-1]), jnp.ones((), tau.dtype)
 
 
-def _bordered_newton(F, x, p, g, linsolver, settings):
-    """Newton on [F(x, p); g(x, p)] = 0; returns (x, p, status, iterations, sign, c)."""
+class PseudoArclength(eqx.Module):
+    """Pseudo-arclength (Keller/Riks): the corrector moves ⊥ (weighted) to the tangent τ."""
 
-    def residuals(x, p):
-        return F(x, p), g(x, p)
+    passes_folds = True
 
-    def merit(r, h):
-        return jnp.sum(r * r) + h * h
-
-    def body(carry):
-        x, p, r, h, it, _, _, _ = carry
-        fp = jax.jvp(lambda q: F(x, q), (p,), (jnp.ones_like(p),))[1]
-        sol, sign = linsolver.solve(lambda y: F(y, p), x, jnp.stack([-r, fp], axis=1))
-        a, c = sol[:, 0], sol[:, 1]
-        gx, gp = jax.grad(g, argnums=(0, 1))(x, p)
-        dp = (-h - jnp.dot(gx, a)) / (gp - jnp.dot(gx, c))
-        dx = a - c * dp
-        m0 = merit(r, h)
-
-        def ls_cond(ls):
-            alpha, k, _, _, m = ls
-            return ~(m <= (1.0 - 1e-4 * alpha) * m0) & (k < settings.max_backtracks)
-
-        def ls_body(ls):
-            alpha, k, _, _, _ = ls
-            alpha = 0.5 * alpha
-            r1, h1 = residuals(x + alpha * dx, p + alpha * dp)
-            return alpha, k + 1, r1, h1, merit(r1, h1)
-
-        alpha, _, r1, h1, m1 = jax.lax.while_loop(
-            ls_cond, ls_body, (jnp.asarray(2.0, x.dtype), -1, r, h, jnp.asarray(jnp.inf, x.dtype))
-        )
-        ok = (m1 <= (1.0 - 1e-4 * alpha) * m0) & jnp.all(jnp.isfinite(dx)) & jnp.isfinite(dp)
-        x1 = jnp.where(ok, x + alpha * dx, x)
-        p1 = jnp.where(ok, p + alpha * dp, p)
-        r1, h1 = jnp.where(ok, r1, r), jnp.where(ok, h1, h)
-        it = it + 1
-        norm = jnp.maximum(jnp.max(jnp.abs(r1)), jnp.abs(h1))
-        status = jnp.where(norm <= settings.atol, Status.CONVERGED, _RUNNING)
-        status = jnp.where((status == _RUNNING) & ~ok, Status.LINE_SEARCH_FAILED, status)
-        status = jnp.where((status == _RUNNING) & (it >= settings.max_iterations), Status.MAX_ITERATIONS, status)
-        return x1, p1, r1, h1, it, status.astype(jnp.int32), sign, c
-
-    r0, h0 = residuals(x, p)
-    status0 = jnp.where(jnp.all(jnp.isfinite(r0)), _RUNNING, Status.NONFINITE).astype(jnp.int32)
-    init = (x, p, r0, h0, jnp.zeros((), jnp.int32), status0, jnp.zeros((), x.dtype), jnp.zeros_like(x))
-    x, p, _, _, it, status, sign, c = jax.lax.while_loop(lambda s: s[5] == _RUNNING, body, init)
-    return x, p, status, it, sign, c
+    def border(self, tau, weights):
+        w = weights * tau
+        return w[:-1], w[-1]
 
 
-def path_start(make_F, x0, weights, linsolver, settings: PathSettings) -> dict:
-    """The carry of :func:`path_run` at a converged point (x₀, p = 0): tangent, det sign and
-    empty step buffers.  ``make_F(x_ref)`` returns the residual F(x, p) with its analysis
-    frames taken at ``x_ref`` (held fixed during one corrector); ``weights`` [n + 1]: the norm
-    weights of (x, p) (see module doc)."""
-    F = make_F(x0)
+def parametrisation(method: str):
+    """The parametrisation of a ``PathSettings.method``."""
+    return PseudoArclength() if method == "arclength" else NaturalParameter()
+
+
+# ----------------------------------------------------------------------- problem
+class PathProblem(eqx.Module):
+    """``F(x, p)`` of a model along a straight line of controls, control(p) = control0 +
+    p (control1 − control0).  ``weights`` [n + 1] define the step norm; ``check`` [n + 1]
+    the norm of the corrector and turn tests (both include p last)."""
+
+    model: eqx.Module
+    control0: Control
+    control1: Control
+    weights: Array
+    check: Array
+
+    def unravel(self):
+        return ravel_pytree(self.model.initial_state())[1]
+
+    def residual(self, x, p, frames):
+        return self.model.residual(self.unravel()(x), self.control0.towards(self.control1, p), frames)
+
+    def frames(self, x):
+        return self.model.frames(self.unravel()(x))
+
+
+def _norm(weights, v):
+    return jnp.sqrt(jnp.maximum(jnp.sum(weights * v * v), 0.0))
+
+
+def _unit_tangent(v, weights, previous):
+    """(−v, 1) normalised in the weighted norm and oriented along ``previous`` (v = J⁻¹F_p)."""
+    t = jnp.concatenate([-v, jnp.ones((1,), v.dtype)])
+    t = t / _norm(weights, t)
+    return jnp.where(jnp.sum(weights * t * previous) < 0, -t, t)
+
+
+def _corrector_fn(y, args):
+    problem, frames, a, b, guess = args
+    F = problem.residual(y[:-1], y[-1], frames)
+    g = jnp.dot(a, y[:-1] - guess[:-1]) + b * (y[-1] - guess[-1])
+    return jnp.concatenate([F, g[None]])
+
+
+def _correct(problem, guess, border, newton):
+    """Newton on [F; g] from ``guess`` = [x̂; p̂]: (y, result, iterations, sign, tangent v)."""
+    frames = problem.frames(guess[:-1])
+    args = jax.lax.stop_gradient((problem, frames, border[0], border[1], guess))
+    sol = root_find(_corrector_fn, jax.lax.stop_gradient(guess), args, solver=newton,
+                    options={"linear": {"border": args[2:4]}})
+    state = sol.state
+    return sol.value, newton_result(sol), state.iterations, state.stats["sign"], state.stats["tangent"], state.residual_norm
+
+
+# ---------------------------------------------------------------------- recorders
+class NoRecorder(eqx.Module):
+    """Keeps nothing (load ramps of :func:`socbjax.solve`)."""
+
+    def init(self, x0, p0):
+        return None
+
+    def record(self, rec, ok, index, previous, new):
+        return rec
+
+
+class StepRecorder(eqx.Module):
+    """Every accepted step: X [m, n], P [m], SIGN [m] (sign det J), TAU_P [m] (dp/ds of the
+    unit tangent), ITER [m] (Newton iterations); m = ``capacity``."""
+
+    capacity: int = eqx.field(static=True)
+
+    def init(self, x0, p0):
+        m, n = self.capacity, x0.shape[0]
+        return dict(X=jnp.zeros((m, n), x0.dtype), P=jnp.zeros(m, x0.dtype), SIGN=jnp.zeros(m, x0.dtype),
+                    TAU_P=jnp.zeros(m, x0.dtype), ITER=jnp.zeros(m, jnp.int32))
+
+    def record(self, rec, ok, index, previous, new):
+        idx = jnp.minimum(index, self.capacity - 1)
+        values = dict(X=new["x"], P=new["p"], SIGN=new["sign"], TAU_P=new["tau"][-1], ITER=new["iterations"])
+        # select the row, not the buffer: an in-place row update instead of a copy of [m, n]
+        return {k: rec[k].at[idx].set(jnp.where(ok, values[k], rec[k][idx])) for k in rec}
+
+
+# ------------------------------------------------------------------------- state
+class PathState(eqx.Module):
+    """The carry of :func:`follow_path` (typed; all arrays, so it crosses jit and vmap).
+
+    x [n], p : last accepted point; tau [n + 1] : unit tangent there; sign : sign(det J)
+    there; sign0 : at the start; ds : next step size; steps, attempts, cutbacks, iterations :
+    counters (after the start); primed : the start has been solved; sign_rejected,
+    fold_rejected : a rejection since the last acceptance was by a det sign change / a fold;
+    residual_norm : Newton's ‖F‖∞ at x; result : :class:`socbjax.RESULTS` (``running`` is
+    ``successful`` with ``done`` False); done; recorder : the recorder's buffers.
+    """
+
+    x: Array
+    p: Array
+    tau: Array
+    sign: Array
+    sign0: Array
+    ds: Array
+    steps: Array
+    attempts: Array
+    cutbacks: Array
+    iterations: Array
+    primed: Array
+    sign_rejected: Array
+    fold_rejected: Array
+    residual_norm: Array
+    result: RESULTS
+    done: Array
+    recorder: object
+
+
+def start_path(x0, p0, settings: PathSettings, recorder) -> PathState:
+    """A fresh :class:`PathState` at (x₀, p₀) (solved, with its tangent, by the first pass of
+    :func:`follow_path`)."""
     dtype = x0.dtype
-    p0 = jnp.zeros((), dtype)
-    fp = jax.jvp(lambda q: F(x0, q), (p0,), (jnp.ones_like(p0),))[1]
-    sol, sign = linsolver.solve(lambda y: F(y, p0), x0, fp[:, None])
-    forward = jnp.zeros(x0.size + 1, dtype).at[-1].set(1.0)
-    tau = _tangent(sol[:, 0], weights, forward)
-    n, m = x0.size, settings.max_steps
-    return dict(
-        x=x0,
-        p=p0,
-        tau=tau,
-        sign=sign,
-        sign0=sign,
-        ds=jnp.asarray(settings.initial_step, dtype),
-        steps=jnp.zeros((), jnp.int32),
-        attempts=jnp.zeros((), jnp.int32),
-        cutbacks=jnp.zeros((), jnp.int32),
-        iterations=jnp.zeros((), jnp.int32),
-        status=jnp.asarray(_RUNNING, jnp.int32),
-        rejected_by_sign=jnp.zeros((), bool),
-        X=jnp.zeros((m, n), dtype),
-        P=jnp.zeros(m, dtype),
-        SIGN=jnp.zeros(m, dtype),
-        TAU_P=jnp.zeros(m, dtype),
-        ITER=jnp.zeros(m, jnp.int32),
+    zero = jnp.zeros((), jnp.int32)
+    p0 = jnp.asarray(p0, dtype)
+    forward = jnp.zeros(x0.shape[0] + 1, dtype).at[-1].set(1.0)
+    return PathState(
+        x=x0, p=p0, tau=forward, sign=jnp.zeros((), dtype), sign0=jnp.zeros((), dtype),
+        ds=jnp.asarray(settings.initial_step, dtype), steps=zero, attempts=zero, cutbacks=zero, iterations=zero,
+        primed=jnp.asarray(False), sign_rejected=jnp.asarray(False), fold_rejected=jnp.asarray(False),
+        residual_norm=jnp.zeros((), dtype), result=RESULTS.successful, done=jnp.asarray(False),
+        recorder=recorder.init(x0, p0),
     )
 
 
-def _attempt(make_F, c, weights, p_scale, linsolver, settings):
-    """One predictor–corrector attempt from the carry's last accepted point."""
-    arclength = settings.method == "arclength"
-    ds, x, p, tau = c["ds"], c["x"], c["p"], c["tau"]
-    # Tangent predictor of length ds; when it would pass p = 1, shorten it to land on p = 1.
-    reach = jnp.where(tau[-1] > 0, (1.0 - p) / jnp.where(tau[-1] > 0, tau[-1], 1.0), jnp.inf)
-    landing = reach <= ds
-    h = jnp.minimum(ds, reach)
-    guess_x, guess_p = x + h * tau[:-1], jnp.where(landing, 1.0, p + h * tau[-1])
-    F = make_F(guess_x)
+def _predict(c: PathState, problem, param, settings):
+    """(guess [n + 1], predicted length h, border row) of the next attempt (or the start)."""
+    tau = c.tau
+    reach = jnp.where(tau[-1] > 0, (1.0 - c.p) / jnp.where(tau[-1] > 0, tau[-1], 1.0), jnp.inf)
+    landing = (reach <= c.ds) | ~c.primed
+    h = jnp.where(c.primed, jnp.minimum(c.ds, reach), 0.0)
+    y = jnp.concatenate([c.x, c.p[None]])
+    guess = y + h * tau
+    guess = guess.at[-1].set(jnp.where(landing & c.primed, 1.0, guess[-1]))
+    natural = NaturalParameter().border(tau, problem.weights)
+    along = param.border(tau, problem.weights)
+    border = jax.tree_util.tree_map(lambda n, a: jnp.where(landing, n, a), natural, along)
+    return y, guess, border
 
-    def g(xx, pp):
-        natural = pp - guess_p
-        if not arclength:
-            return natural
-        along = _inner(weights, tau, jnp.concatenate([xx - guess_x, (pp - guess_p)[None]]))
-        return jnp.where(landing, natural, along)
 
-    x1, p1, status, it, sign, cc = _bordered_newton(F, guess_x, guess_p, g, linsolver, settings)
-    converged = status == Status.CONVERGED
-    secant = jnp.concatenate([x1 - x, (p1 - p)[None]])
-    secant = secant / jnp.sqrt(jnp.maximum(_inner(weights, secant, secant), 1e-300))
-    tau1 = _tangent(cc, weights, secant)
+def _accept(c: PathState, problem, param, settings, y, guess, y1, converged, sign, v):
+    """Acceptance tests of one attempt: (ok, new unit tangent, sign flip, fold)."""
+    w, check = problem.weights, problem.check
+    secant = y1 - y
+    secant = jnp.where(_norm(w, secant) > 0, secant / jnp.maximum(_norm(w, secant), 1e-300), c.tau)
+    tau1 = _unit_tangent(v, w, jnp.where(c.primed, secant, c.tau))
     tau1 = jnp.where(jnp.all(jnp.isfinite(tau1)), tau1, secant)
-    moved = jnp.concatenate([x1 - guess_x, (p1 - guess_p)[None]])
-    smooth = jnp.sqrt(_inner(weights, moved, moved)) <= settings.max_corrector_ratio * h + 1e-12
-    turned = jnp.arccos(jnp.clip(_inner(weights, tau1, tau), -1.0, 1.0)) <= settings.max_turn
-    # Displacement control cannot pass a fold: det J changes sign and the path turns back in p.
-    fold = (sign != c["sign"]) | (tau1[-1] <= 0)
-    passable = ~fold | arclength
-    ok = converged & smooth & turned & passable & (sign != 0)
-    return ok, x1, p1, tau1, sign, it, converged & ~passable
+    floor = settings.corrector_floor * (1.0 + _norm(check, jnp.concatenate([c.x, jnp.zeros(1, y.dtype)])))
+    smooth = _norm(check, y1 - guess) <= settings.max_corrector_ratio * _norm(check, guess - y) + floor
+    turned = jnp.arccos(jnp.clip(jnp.sum(w * tau1 * c.tau), -1.0, 1.0)) <= settings.max_turn
+    sign_flip = (sign != c.sign) & settings.detect_critical_points
+    fold = tau1[-1] <= 0
+    natural_ok = ~sign_flip & ~fold
+    ok = converged & smooth & turned & (sign != 0) & (natural_ok | param.passes_folds)
+    return jnp.where(c.primed, ok, converged), tau1, sign_flip, fold
 
 
-def path_run(make_F, carry: dict, weights, p_scale, linsolver, settings: PathSettings, chunk) -> dict:
-    """Continue the path in ``carry`` until p = 1, failure, the buffer is full, or ``chunk``
-    more steps have been accepted (status stays running: call again to resume)."""
-    stop_at = carry["steps"] + chunk
+def _attempt(c: PathState, problem, param, settings, newton, recorder) -> PathState:
+    y, guess, border = _predict(c, problem, param, settings)
+    y1, result, iterations, sign, v, residual_norm = _correct(problem, guess, border, newton)
+    converged = result == RESULTS.successful
+    ok, tau1, sign_flip, fold = _accept(c, problem, param, settings, y, guess, y1, converged, sign, v)
+    primed = c.primed
+    fast = iterations <= settings.fast_iterations
+    grown = jnp.minimum(jnp.where(fast, settings.grow, 1.0) * c.ds, settings.max_step)
+    new = dict(x=y1[:-1], p=y1[-1], sign=sign, tau=tau1, iterations=iterations)
+    rec = recorder.record(c.recorder, ok & primed, c.steps, dict(x=c.x, p=c.p, sign=c.sign), new)
+    steps = c.steps + (ok & primed).astype(jnp.int32)
+    attempts = c.attempts + primed.astype(jnp.int32)
+    natural = not param.passes_folds
+    near_fold = natural & (jnp.abs(c.tau[-1]) * jnp.sqrt(problem.weights[-1]) < 0.1)
+    sign_rejected = jnp.where(ok, False, c.sign_rejected | (converged & sign_flip & ~fold))
+    fold_rejected = jnp.where(ok, False, c.fold_rejected | (converged & fold & natural) | near_fold)
+    ds = jnp.where(ok, jnp.where(primed, grown, c.ds), 0.5 * c.ds)
+    done_ok = ok & primed & (y1[-1] >= 1.0 - 1e-12)
+    small = primed & ~ok & (ds < settings.min_step)
+    failure = RESULTS.where(fold_rejected, RESULTS.fold,
+                            RESULTS.where(sign_rejected, RESULTS.critical_point, RESULTS.step_too_small))
+    out = RESULTS.where(small, failure, RESULTS.successful)
+    out = RESULTS.where(~primed & ~ok, RESULTS.not_equilibrium, out)
+    full = (steps >= settings.max_steps) | (attempts >= settings.max_attempts)
+    out = RESULTS.where((out == RESULTS.successful) & ~done_ok & full, RESULTS.max_steps, out)
+    return PathState(
+        x=jnp.where(ok, y1[:-1], c.x), p=jnp.where(ok, y1[-1], c.p), tau=jnp.where(ok, tau1, c.tau),
+        sign=jnp.where(ok, sign, c.sign), sign0=jnp.where(primed, c.sign0, sign), ds=ds, steps=steps,
+        attempts=attempts, cutbacks=c.cutbacks + (primed & ~ok).astype(jnp.int32),
+        iterations=c.iterations + jnp.where(primed, iterations, 0), primed=primed | ok,
+        sign_rejected=sign_rejected, fold_rejected=fold_rejected,
+        residual_norm=jnp.where(ok, residual_norm, c.residual_norm), result=out,
+        done=done_ok | (out != RESULTS.successful), recorder=rec,
+    )
+
+
+def follow_path(problem: PathProblem, state: PathState, settings: PathSettings, inner, recorder, *,
+                stop_after=None) -> PathState:
+    """Continue the path in ``state`` until p = 1, a failure, or ``stop_after`` more accepted
+    steps (then ``state.done`` is False: call again to resume).  ``settings``: a filled
+    :class:`PathSettings`; ``inner``: the linear solver of J (:class:`socbjax.DenseLU`,
+    :class:`socbjax.ColouredSparseLU`); ``recorder``: what to keep of accepted steps.
+    Differentiation does not pass through the path (use the implicit adjoint on its end)."""
+    problem = jax.lax.stop_gradient(problem)
+    param = parametrisation(settings.method)
+    newton = settings.newton(inner)
+    stop_at = state.steps + (settings.max_steps if stop_after is None else stop_after)
 
     def cond(c):
-        return (c["status"] == _RUNNING) & (c["steps"] < stop_at)
+        return ~c.done & (c.steps < stop_at)
 
     def body(c):
-        ok, x1, p1, tau1, sign, it, sign_flip = _attempt(make_F, c, weights, p_scale, linsolver, settings)
-        k = c["steps"]
-        fast = it <= settings.fast_iterations
-        new = dict(c)
-        new["x"] = jnp.where(ok, x1, c["x"])
-        new["p"] = jnp.where(ok, p1, c["p"])
-        new["tau"] = jnp.where(ok, tau1, c["tau"])
-        new["sign"] = jnp.where(ok, sign, c["sign"])
-        new["ds"] = jnp.where(ok, jnp.minimum(jnp.where(fast, 1.5, 1.0) * c["ds"], settings.max_step), 0.5 * c["ds"])
-        new["steps"] = k + ok.astype(jnp.int32)
-        new["attempts"] = c["attempts"] + 1
-        new["cutbacks"] = c["cutbacks"] + (~ok).astype(jnp.int32)
-        new["iterations"] = c["iterations"] + it
-        # A fold ahead: some rejection since the last accepted step crossed it (det J sign or
-        # a backward tangent), or the path is nearly vertical in p (|dp/ds| p_scale < 0.1).
-        near_fold = (settings.method != "arclength") & (jnp.abs(c["tau"][-1]) * p_scale < 0.1)
-        new["rejected_by_sign"] = jnp.where(ok, False, c["rejected_by_sign"] | sign_flip | near_fold)
-        idx = jnp.minimum(k, settings.max_steps - 1)
-        for name, value in (("X", x1), ("P", p1), ("SIGN", sign), ("TAU_P", tau1[-1]), ("ITER", it)):
-            new[name] = jnp.where(ok, c[name].at[idx].set(value), c[name])
-        done = ok & (p1 >= 1.0 - 1e-12)
-        too_small = ~ok & (new["ds"] < settings.min_step)
-        failure = jnp.where(new["rejected_by_sign"], Status.CRITICAL_POINT, Status.CONTINUATION_FAILED)
-        full = (new["steps"] >= settings.max_steps) | (new["attempts"] >= settings.max_attempts)
-        status = jnp.where(done, Status.CONVERGED, jnp.where(too_small, failure, jnp.where(full, Status.MAX_STEPS, _RUNNING)))
-        new["status"] = status.astype(jnp.int32)
-        return new
+        return _attempt(c, problem, param, settings, newton, recorder)
 
-    return jax.lax.while_loop(cond, body, carry)
+    return jax.lax.while_loop(cond, body, state)
 
 
-def path_weights(x_template: Array, geometry_mask: Array, n_nodes: int, p_scale) -> Array:
-    """Norm weights [n + 1]: ``geometry_mask`` (squared µm per unit of each state entry,
-    zero for entries left out) averaged over nodes, and p scaled to µm."""
-    w = geometry_mask / n_nodes
-    return jnp.concatenate([w, jnp.asarray(p_scale, x_template.dtype)[None] ** 2])
+def path_weights(model, p_scale) -> Array:
+    """Norm weights [n + 1] for probe paths: node positions and directors (× mean segment
+    length, so in µm), averaged over nodes, and p scaled to µm by ``p_scale``; moments and
+    forces grow along any path and would hide a jump between branches."""
+    zeros = jax.tree_util.tree_map(jnp.zeros_like, model.initial_state())
+    ell = jnp.mean(model.network.lengths)
+    fields = ("positions", "directors") if hasattr(zeros, "directors") else ("positions", "directions")
+    ones = tuple(jnp.full_like(getattr(zeros, f), 1.0 if f == "positions" else ell**2) for f in fields)
+    geometry = ravel_pytree(eqx.tree_at(lambda st: tuple(getattr(st, f) for f in fields), zeros, ones))[0]
+    return jnp.concatenate([geometry / model.network.n_nodes, jnp.asarray(p_scale, geometry.dtype)[None] ** 2])
+
+
+def position_weights(model) -> Array:
+    """Weights [n + 1] selecting the node positions (p weight 0): the corrector test of load
+    ramps, which compares geometric changes only (forces and moments grow with λ)."""
+    zeros = jax.tree_util.tree_map(jnp.zeros_like, model.initial_state())
+    positions = ravel_pytree(eqx.tree_at(lambda st: st.positions, zeros, jnp.ones_like(zeros.positions)))[0]
+    return jnp.concatenate([positions, jnp.zeros(1, positions.dtype)])

@@ -1,28 +1,22 @@
-"""Figures (matplotlib, Agg backend: no display needed)."""
+"""Deformed shapes of static solutions on a matplotlib axes (no global backend changes)."""
 
 from __future__ import annotations
 
-import matplotlib
+import numpy as np
 
-matplotlib.use("Agg")
-import matplotlib.pyplot as plt  # noqa: E402
-import numpy as np  # noqa: E402
-
-from ._shape import filament_curve  # noqa: E402
-
-__all__ = ["plot_shapes", "plt"]
+__all__ = ["plot_shapes"]
 
 
-def plot_shapes(ax, items, *, plane=(0, 1)):
+def plot_shapes(ax, items, *, plane=(0, 1), points_per_segment: int = 24):
     """Draw filament shapes on ``ax``.
 
-    ``items``: iterable of (label, solution, network, style dict).  SOCB solutions are drawn
-    as the smooth curve of their angle polynomials, with nodes marked.
+    ``items``: iterable of (label, solution, style dict).  SOCB solutions are drawn as the
+    smooth curve of their angle polynomials (:meth:`socbjax.Solution.curve`), jointed ones as
+    their rigid bars, with nodes marked.
     """
     i, j = plane
-    for label, solution, network, style in items:
-        curve = filament_curve(solution, network)
-        xy = np.concatenate([c for c in curve], axis=0)
+    for label, solution, style in items:
+        xy = solution.curve(points_per_segment).polyline()
         (line,) = ax.plot(xy[:, i], xy[:, j], label=label, **style)
         nodes = np.asarray(solution.positions)
         ax.plot(nodes[:, i], nodes[:, j], "o", ms=4, color=line.get_color())

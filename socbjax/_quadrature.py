@@ -33,6 +33,7 @@ __all__ = [
     "gauss_legendre",
     "integration_matrix",
     "hermite_basis",
+    "hermite_basis_derivative",
     "SegmentQuadrature",
     "get_quadrature",
 ]
@@ -96,6 +97,16 @@ def hermite_basis(points: tuple[float, ...]) -> np.ndarray:
     sigma = np.asarray(points, dtype=np.float64)
     coeffs = np.linalg.inv(coupling_matrix(1.0))  # maps data -> coefficients
     monomials = sigma[:, None] ** np.arange(6)[None, :]
+    return monomials @ coeffs
+
+
+@functools.lru_cache(maxsize=None)
+def hermite_basis_derivative(points: tuple[float, ...]) -> np.ndarray:
+    """dH[k, j]/dσ at normalised points σ_k: θ'(σ_k) = Σ_j dH[k, j] d_j (per unit σ)."""
+    sigma = np.asarray(points, dtype=np.float64)
+    coeffs = np.linalg.inv(coupling_matrix(1.0))
+    powers = np.arange(6)
+    monomials = powers[None, :] * sigma[:, None] ** np.maximum(powers - 1, 0)[None, :]
     return monomials @ coeffs
 
 

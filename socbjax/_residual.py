@@ -1,5 +1,5 @@
-"""The SOCB system of a whole network: segment equations (vmapped), force balance (Eq. 10)
-and supports, with state packing.
+"""The SOCB system of a whole network: segment equations (vmapped), force balance (Eq. 10),
+supports, junctions and nodal couples, with state packing.
 
 Unknowns (:class:`SOCBState`):
 
@@ -8,15 +8,22 @@ Unknowns (:class:`SOCBState`):
   vector with m·t = 0 imposed: the rod is torsion-free);
 * per segment: internal force n (d).
 
+The controls of a path (:class:`Control`) are the load factor λ (scaling the network's
+``loads`` and ``couples``), the probe displacement u (µm) and whether the probe holds its
+nodes along the probe direction (``probe_held`` = 1) or lets them slide freely (0, the
+settle phase of :func:`socbjax.compress`).
+
 Equations, all dimensionless (forces by EI/l², moments by EI/l, lengths by l, with the
 network's mean l and EI):
 
-* per segment: the kernel of :mod:`socbjax._segment` (2D: 4 rows, 3D: 7 rows);
+* per segment: the kernel of :mod:`socbjax._segment` (2D: 4 rows, 3D: 7 rows), with the
+  start moment reduced by the moments handed over at the start node (junction daughters and
+  applied couples, :mod:`socbjax._junction`);
 * per node, candidates from which ``Network.socb_rows`` selects statically:
-  - force balance (Eq. 10)  Σ_{ending at i} n − Σ_{starting at i} n − F_i = 0  in the free
+  - force balance (Eq. 10)  Σ_{ending at i} n − Σ_{starting at i} n − λF_i = 0  in the free
     directions of the node, prescribed position in the constrained ones;
-  - 2D: θ = θ_ref where clamped; m = 0 at free/pinned ends;
-  - 3D: |t|² = 1 (or t = t_ref where clamped); m·t = 0 (or m = 0 at free/pinned ends).
+  - 2D: θ = θ_ref where clamped; m = (handed-over moments) at free/pinned ends;
+  - 3D: |t|² = 1 (or t = t_ref where clamped); m·t = 0 (or the end moment at free ends).
 
 Count (clamped–free chain, N nodes): 2D 6N − 2 unknowns and equations, 3D 12N − 3.
 """
@@ -30,20 +37,42 @@ import numpy as np
 from jaxtyping import Array, Float
 
 from ._geometry import orthonormal_complement
+from ._junction import director_targets, moment_transfer, nodal_couple_transfer
 from ._network import Network
 from ._quadrature import SegmentQuadrature
 from ._segment import planar_segment_residual, spatial_segment_residual
 
 __all__ = [
+    "Control",
     "SOCBState",
-    "socb_initial_state",
+    "SOCBModel",
     "socb_residual",
-    "socb_frames",
     "net_nodal_force",
     "routed_nodal_force",
     "reference_scales",
+    "support_rows",
     "socb_structure",
+    "state_tangents",
 ]
+
+
+class Control(eqx.Module):
+    """The control parameters of a residual: load factor λ (×``loads`` and ``couples``),
+    probe displacement u (µm) and ``probe_held`` (1: probe nodes prescribed along the probe
+    direction; 0: free along it).  Scalars, traced."""
+
+    load_factor: Array
+    displacement: Array
+    probe_held: Array
+
+    @staticmethod
+    def make(load_factor=1.0, displacement=0.0, probe_held=1.0) -> Control:
+        f = lambda v: jnp.asarray(v, jnp.float64)  # noqa: E731
+        return Control(f(load_factor), f(displacement), f(probe_held))
+
+    def towards(self, other: Control, p) -> Control:
+        """The linear interpolation self + p (other − self) (p ∈ [0, 1])."""
+        return jax.tree_util.tree_map(lambda a, b: a + p * (b - a), self, other)
 
 
 class SOCBState(eqx.Module):
@@ -55,20 +84,11 @@ class SOCBState(eqx.Module):
     forces: Float[Array, "S d"]  # internal force per segment (pN)
 
 
-def socb_initial_state(network: Network) -> SOCBState:
-    """The unloaded straight reference state (an exact solution at zero load)."""
-    if network.dim == 2:
-        directors = jnp.arctan2(network.tangents[:, 1], network.tangents[:, 0])
-        moments = jnp.zeros(network.n_nodes)
-    else:
-        directors = network.tangents
-        moments = jnp.zeros((network.n_nodes, 3))
-    return SOCBState(
-        positions=network.positions,
-        directors=directors,
-        moments=moments,
-        forces=jnp.zeros((network.n_segments, network.dim)),
-    )
+def state_tangents(directors, dim: int) -> Array:
+    """Unit tangents [N, d] from SOCB directors (2D angles, 3D tangent vectors)."""
+    if dim == 2:
+        return jnp.stack([jnp.cos(directors), jnp.sin(directors)], axis=-1)
+    return directors / jnp.linalg.norm(directors, axis=-1, keepdims=True)
 
 
 def reference_scales(network: Network):
@@ -76,17 +96,6 @@ def reference_scales(network: Network):
     length = jnp.mean(network.lengths)
     EI = jnp.mean(network.EI)
     return length, EI, EI / length**2
-
-
-def socb_frames(state: SOCBState, network: Network) -> Float[Array, "S 2 3"]:
-    """Per-segment 'analysis frames' (paper Fig. 3): a basis of the plane ⊥ the segment's
-    mean tangent, taken from ``state`` and held fixed during a Newton solve."""
-    if network.dim == 2:
-        return jnp.zeros((network.n_segments, 2, 3))
-    t = state.directors / jnp.linalg.norm(state.directors, axis=-1, keepdims=True)
-    mean = t[network.segments[:, 0]] + t[network.segments[:, 1]]
-    mean = mean / jnp.linalg.norm(mean, axis=-1, keepdims=True)
-    return jax.lax.stop_gradient(jax.vmap(orthonormal_complement)(mean))
 
 
 def net_nodal_force(forces: Float[Array, "S d"], network: Network, loads: Float[Array, "N d"]) -> Float[Array, "N d"]:
@@ -105,106 +114,65 @@ def routed_nodal_force(forces, network: Network, loads) -> Float[Array, "N d"]:
     return jax.ops.segment_sum(imbalance, network.attach, num_segments=network.n_nodes)
 
 
-def _unit(v):
-    return v / jnp.linalg.norm(v, axis=-1, keepdims=True)
-
-
-def _transport(a, b, v):
-    """Minimal rotation taking unit a to unit b (about a × b), applied to v.  Singular only
-    for b = −a (a mother tangent reversed by 180° at a junction)."""
-    ab = a + b
-    return v + 2.0 * jnp.sum(a * v, -1, keepdims=True) * b - jnp.sum(ab * v, -1, keepdims=True) / (
-        1.0 + jnp.sum(a * b, -1, keepdims=True)
-    ) * ab
-
-
-def _support_rows(state_positions, imbalance, network: Network, displacement=0.0):
+def support_rows(state_positions, imbalance, network: Network, control: Control | None = None):
+    """Node rows [N, d]: prescribed position (µm, by the reference length) in the supported
+    directions of each node, force balance (by the reference force) in the free ones.  The
+    probe nodes move by ``control.displacement`` along the probe direction, and slide freely
+    along it when ``control.probe_held`` is 0."""
+    control = Control.make() if control is None else control
     length, _, force = reference_scales(network)
     attached = network.attached[:, None]
     eye = jnp.eye(network.dim)
-    P = jnp.where(attached[..., None], eye[None], network.position_projector)
-    moved = network.positions + displacement * network.probe[:, None] * network.probe_direction[None, :]
+    axis = jnp.asarray(network.probe_direction)
+    released = (1.0 - control.probe_held) * jnp.outer(axis, axis)
+    P = jnp.asarray(network.position_projector) - jnp.where(network.probe[:, None, None], released, 0.0)
+    P = jnp.where(attached[..., None], eye[None], P)
+    moved = network.positions + control.displacement * network.probe[:, None] * axis[None, :]
     target = jnp.where(attached, state_positions[network.attach], moved)
     fixed = jnp.einsum("nij,nj->ni", P, state_positions - target) / length
     free = jnp.einsum("nij,nj->ni", eye[None] - P, imbalance) / force
     return fixed + free
 
 
-def _director_targets(directors, network: Network):
-    """Prescribed directors: the reference one at clamps; at a daughter base, the reference
-    daughter direction carried along with the mother's current tangent (2D: fixed angle
-    offset; 3D: minimal rotation of the reference pair, see docs/equations.md)."""
-    attached = network.attached
-    J = network.attach
+def _frames(state: SOCBState, network: Network) -> Float[Array, "S 2 3"]:
+    """Per-segment 'analysis frames' (paper Fig. 3): a basis of the plane ⊥ the segment's
+    mean tangent, taken from ``state`` and held fixed during a Newton solve."""
     if network.dim == 2:
-        ref = jnp.arctan2(network.tangents[:, 1], network.tangents[:, 0])
-        offset = jnp.arctan2(jnp.sin(ref - ref[J]), jnp.cos(ref - ref[J]))
-        return jnp.where(attached, directors[J] + offset, ref)
-    carried = _transport(network.tangents[J], _unit(directors[J]), network.tangents)
-    return jnp.where(attached[:, None], carried, network.tangents)
+        return jnp.zeros((network.n_segments, 2, 3))
+    t = state_tangents(state.directors, 3)
+    mean = t[network.segments[:, 0]] + t[network.segments[:, 1]]
+    mean = mean / jnp.linalg.norm(mean, axis=-1, keepdims=True)
+    return jax.lax.stop_gradient(jax.vmap(orthonormal_complement)(mean))
 
 
-def _moment_transfer(state, network: Network):
-    """Daughter base moments handed to the mother (Σ end moments = 0 at a junction).
-
-    Returns (per segment [S] / [S, 3]: subtracted from the start moment of the mother segment
-    that leaves the junction; per node: subtracted in the end-moment equation of a mother
-    node where no segment leaves).  In 3D the component along the mother tangent (a twist,
-    which the torsion-free rod does not carry) is dropped."""
-    m, J, n_seg = state.moments, network.attach, network.n_segments
-    if network.dim == 3:
-        tJ = _unit(state.directors[J])
-        m = m - jnp.sum(m * tJ, -1, keepdims=True) * tJ
-    m = jnp.where(network.attached.reshape((-1,) + (1,) * (m.ndim - 1)), m, 0.0)
-    to_segment = jax.ops.segment_sum(m, network.transfer_segment, num_segments=n_seg + 1)[:n_seg]
-    at_end = (network.transfer_segment == n_seg).reshape((-1,) + (1,) * (m.ndim - 1))
-    to_node = jax.ops.segment_sum(jnp.where(at_end, m, 0.0), J, num_segments=network.n_nodes)
-    return to_segment, to_node
-
-
-def socb_residual(
-    state: SOCBState,
-    network: Network,
-    loads: Float[Array, "N d"],
-    frames: Float[Array, "S 2 3"],
-    quad: SegmentQuadrature,
-    displacement=0.0,
-) -> Float[Array, " R"]:
-    """The full SOCB residual vector (dimensionless), segment rows first, then node rows.
-
-    ``loads`` [N, d] external nodal forces (pN); ``displacement`` probe displacement (µm)."""
+def _segment_rows(state, network, quad, frames, m_start):
     a, b = network.segments[:, 0], network.segments[:, 1]
     r, d, m = state.positions, state.directors, state.moments
+    if network.dim == 2:
+        kernel = jax.vmap(planar_segment_residual, in_axes=(0,) * 9 + (None,))
+        return kernel(r[a], d[a], m_start, r[b], d[b], m[b], state.forces, network.lengths, network.EI, quad)
+    kernel = jax.vmap(spatial_segment_residual, in_axes=(0,) * 10 + (None,))
+    return kernel(r[a], d[a], m_start, r[b], d[b], m[b], state.forces, network.lengths, network.EI, frames, quad)
+
+
+def socb_residual(state: SOCBState, network: Network, control: Control, frames: Float[Array, "S 2 3"],
+                  quad: SegmentQuadrature) -> Float[Array, " R"]:
+    """The full SOCB residual vector (dimensionless), segment rows first, then node rows."""
+    r, d, m = state.positions, state.directors, state.moments
     length_ref, EI_ref, _ = reference_scales(network)
-    to_segment, to_node = _moment_transfer(state, network)
-    m_start = m[a] - to_segment
+    junction_segment, junction_node = moment_transfer(state, network)
+    couple_segment, couple_node = nodal_couple_transfer(control.load_factor * network.couples, network)
+    seg = _segment_rows(state, network, quad, frames, m[network.segments[:, 0]] - junction_segment - couple_segment)
+    imbalance = routed_nodal_force(state.forces, network, control.load_factor * network.loads)
+    support = support_rows(r, imbalance, network, control)
+    end_moment = (m - junction_node - couple_node) * (length_ref / EI_ref)
+    director_error = d - director_targets(d, network)
     if network.dim == 2:
-        seg = jax.vmap(planar_segment_residual, in_axes=(0,) * 9 + (None,))(
-            r[a], d[a], m_start, r[b], d[b], m[b], state.forces, network.lengths, network.EI, quad
-        )
+        candidates = jnp.concatenate([support, director_error[:, None], end_moment[:, None]], axis=1)
     else:
-        seg = jax.vmap(spatial_segment_residual, in_axes=(0,) * 10 + (None,))(
-            r[a], d[a], m_start, r[b], d[b], m[b], state.forces, network.lengths, network.EI, frames, quad
-        )
-    imbalance = routed_nodal_force(state.forces, network, loads)
-    support = _support_rows(r, imbalance, network, displacement)
-    moment_scale = length_ref / EI_ref
-    director_target = _director_targets(d, network)
-    if network.dim == 2:
-        candidates = jnp.concatenate(
-            [support, (d - director_target)[:, None], ((m - to_node) * moment_scale)[:, None]], axis=1
-        )
-    else:
-        candidates = jnp.concatenate(
-            [
-                support,
-                (0.5 * (jnp.sum(d * d, axis=1) - 1.0))[:, None],
-                d - director_target,
-                (jnp.sum(m * d, axis=1) * moment_scale)[:, None],
-                (m - to_node) * moment_scale,
-            ],
-            axis=1,
-        )
+        norm_row = 0.5 * (jnp.sum(d * d, axis=1) - 1.0)
+        torsion_free = jnp.sum(m * d, axis=1) * (length_ref / EI_ref)
+        candidates = jnp.concatenate([support, norm_row[:, None], director_error, torsion_free[:, None], end_moment], axis=1)
     return jnp.concatenate([seg.ravel(), candidates.ravel()[network.socb_rows]])
 
 
@@ -225,11 +193,9 @@ def socb_structure(network: Network):
         np.repeat(node_ids, d), np.repeat(node_ids, director_width), np.repeat(node_ids, director_width),
         np.repeat(n_nodes + np.arange(n_seg), d),
     ])
-    seg_rows = 4 if d == 2 else 7
-    width = 4 if d == 2 else 11
+    seg_rows, width = (4, 4) if d == 2 else (7, 11)
     rows = np.concatenate([np.repeat(n_nodes + np.arange(n_seg), seg_rows), np.asarray(network.socb_rows) // width])
-    seg = np.asarray(network.segments)
-    attach = np.asarray(network.attach)
+    seg, attach = np.asarray(network.segments), np.asarray(network.attach)
     daughters = np.flatnonzero(attach != node_ids)
     edges = np.concatenate([
         np.stack([seg[:, 0], n_nodes + np.arange(n_seg)], 1),
@@ -240,23 +206,41 @@ def socb_structure(network: Network):
 
 
 class SOCBModel(eqx.Module):
-    """The SOCB discretisation of a network, as used by the solvers.
-
-    ``quadrature_order`` Gauss–Legendre points per segment (Eq. 7; default 8).
-    """
+    """The SOCB discretisation of a network, as used by the solvers: ``network`` (values
+    traced) and the Gauss–Legendre ``quad`` (static; Eq. 7, default order 8)."""
 
     network: Network
     quad: SegmentQuadrature = eqx.field(static=True)
+    name = "socb"
 
     def initial_state(self) -> SOCBState:
-        return socb_initial_state(self.network)
+        """The unloaded straight reference state (an exact solution at zero load)."""
+        net = self.network
+        if net.dim == 2:
+            directors, moments = jnp.arctan2(net.tangents[:, 1], net.tangents[:, 0]), jnp.zeros(net.n_nodes)
+        else:
+            directors, moments = net.tangents, jnp.zeros((net.n_nodes, 3))
+        return SOCBState(positions=net.positions, directors=directors, moments=moments,
+                         forces=jnp.zeros((net.n_segments, net.dim)))
+
+    @property
+    def n_unknowns(self) -> int:
+        """Size of the flat state (host side, no tracing)."""
+        net, w = self.network, (1 if self.network.dim == 2 else 3)
+        return net.n_nodes * (net.dim + 2 * w) + net.n_segments * net.dim
 
     def structure(self):
         """See :func:`socb_structure`."""
         return socb_structure(self.network)
 
     def frames(self, state: SOCBState):
-        return socb_frames(state, self.network)
+        return _frames(state, self.network)
 
-    def residual(self, state: SOCBState, loads, frames, displacement=0.0):
-        return socb_residual(state, self.network, loads, frames, self.quad, displacement)
+    def residual(self, state: SOCBState, control: Control, frames):
+        return socb_residual(state, self.network, control, frames, self.quad)
+
+    def tangents(self, state: SOCBState) -> Array:
+        return state_tangents(state.directors, self.network.dim)
+
+    def node_moments(self, state: SOCBState) -> Array:
+        return state.moments

@@ -1,19 +1,26 @@
 """Result of a displacement-controlled compression: :class:`CompressionResult`.
 
-Host-side (numpy) arrays, one row per recorded equilibrium along the path, in path order:
-the settled start (phase 0), the loading steps (phase 1), the unloading steps (phase 2).
-Units: µm, pN, pN·µm.
+An ``eqx.Module`` pytree (``jax.jit`` can return it; ``compress(..., at=...)`` is traced end
+to end): one row per recorded equilibrium along the path, in path order — the settled start
+(phase 0), the loading steps (phase 1), the unloading steps (phase 2) — or, sampled with
+``at=``, one row per requested displacement.  Units: µm, pN, pN·µm.
 """
 
 from __future__ import annotations
 
 import dataclasses
+import json
 from typing import Any
 
+import equinox as eqx
+import jax.numpy as jnp
 import numpy as np
+from jaxtyping import Array
 
+from ._equilibrium import Solution
 from ._network import Network
-from ._newton import Status
+from ._residual import SOCBState, net_nodal_force
+from ._solution import RESULTS, result_message
 
 __all__ = ["CompressionResult", "LimitPoint", "PHASES"]
 
@@ -40,17 +47,16 @@ class LimitPoint:
     phase: str
 
 
-@dataclasses.dataclass(eq=False)
-class CompressionResult:
+class CompressionResult(eqx.Module):
     """A compression (and optional withdrawal) path; see :func:`socbjax.compress`.
 
     displacement : [K] probe displacement from the as-built position along the probe
         direction (µm, compression positive).
     force : [K] probe reaction along the compression axis (pN, compressive positive).
-    converged : [K] bool, every recorded step is a converged equilibrium (failed attempts
-        are cut back and never recorded; ``status`` says whether the protocol completed).
+    converged : [K] bool, the row is a converged equilibrium (path steps always are: failed
+        attempts are cut back and never recorded; sampled rows may not be reached).
     stable : [K] bool, sign(det J) equals that of the settled start state: an even number of
-        unstable modes (see docs/equations.md: a parity indicator of stability).
+        unstable modes (a parity indicator of stability, see docs/equations.md).
     phase : [K] int, 0 settle, 1 loading, 2 unloading (names in ``PHASES``).
     positions, tangents : [K, N, d] node positions (µm) and unit tangents.
     moments : [K, N] (2D, pN·µm) or [K, N, 3] (3D) nodal bending moments.
@@ -58,36 +64,41 @@ class CompressionResult:
     end_nodes : [E] supported non-probe nodes (strand ends on the surface).
     end_forces : [K, E] axial force on each strand end (pN, compressive positive).
     iterations : [K] Newton iterations of each step.
-    limit_points : events found along the path (:class:`LimitPoint`).
-    status : :class:`Status` code of the whole protocol (CONVERGED: every phase completed).
-    network : the compressed :class:`Network`.
+    result : :class:`socbjax.RESULTS` item of the whole protocol (successful: every phase
+        completed and, when sampled, every sample converged).
+    network : the compressed network, its ``loads`` the applied ones (perturbation included).
+    limit_points : events found along the path (:class:`LimitPoint`; empty when sampled).
     parameters : JSON-able dict of the run's settings (and builder parameters if given).
     """
 
-    displacement: np.ndarray
-    force: np.ndarray
-    converged: np.ndarray
-    stable: np.ndarray
-    phase: np.ndarray
-    positions: np.ndarray
-    tangents: np.ndarray
-    moments: np.ndarray
-    segment_forces: np.ndarray
-    end_nodes: np.ndarray
-    end_forces: np.ndarray
-    iterations: np.ndarray
-    limit_points: list[LimitPoint]
-    status: int
+    displacement: Array
+    force: Array
+    converged: Array
+    stable: Array
+    phase: Array
+    positions: Array
+    tangents: Array
+    moments: Array
+    segment_forces: Array
+    end_nodes: Array
+    end_forces: Array
+    iterations: Array
+    result: RESULTS
     network: Network
-    parameters: dict[str, Any]
+    limit_points: tuple = eqx.field(static=True, default=())
+    parameters_json: str = eqx.field(static=True, default="{}")
+
+    @property
+    def parameters(self) -> dict[str, Any]:
+        return json.loads(self.parameters_json)
 
     @property
     def completed(self) -> bool:
-        return int(self.status) == Status.CONVERGED
+        return bool(self.result == RESULTS.successful)
 
     @property
     def status_message(self) -> str:
-        return Status(int(self.status)).message
+        return result_message(self.result)
 
     @property
     def n_steps(self) -> int:
@@ -96,28 +107,53 @@ class CompressionResult:
     @property
     def loading(self) -> np.ndarray:
         """[K] bool: settle point and loading steps."""
-        return self.phase <= 1
+        return np.asarray(self.phase) <= 1
 
     @property
     def unloading(self) -> np.ndarray:
         """[K] bool: unloading steps, preceded by the last loading step."""
-        mask = self.phase == 2
+        mask = np.asarray(self.phase) == 2
         if mask.any():
             mask = mask.copy()
             mask[np.argmax(mask) - 1] = True
         return mask
 
+    def solution(self, i: int) -> Solution:
+        """Row ``i`` as a :class:`socbjax.Solution` (curve, end rotations, deflection, reactions)."""
+        net = self.network
+        i = int(i) if not isinstance(i, (jnp.ndarray, np.ndarray)) else i
+        positions, tangents, moments, forces = (self.positions[i], self.tangents[i], self.moments[i], self.segment_forces[i])
+        EI = jnp.zeros(net.n_nodes).at[net.segments.ravel()].set(jnp.repeat(net.EI, 2))
+        if net.dim == 2:
+            angles = jnp.arctan2(tangents[:, 1], tangents[:, 0])
+            directors, curvatures = angles, moments / EI
+        else:
+            angles = jnp.stack([jnp.arctan2(tangents[:, 1], tangents[:, 0]), jnp.arcsin(jnp.clip(tangents[:, 2], -1, 1))], -1)
+            directors, curvatures = tangents, moments / EI[:, None]
+        reactions = jnp.einsum("nij,nj->ni", jnp.asarray(net.position_projector), net_nodal_force(forces, net, net.loads))
+        row = RESULTS.where(jnp.asarray(self.converged)[i], RESULTS.successful, RESULTS.not_reached)
+        state = SOCBState(positions=positions, directors=directors, moments=moments, forces=forces)
+        zero = jnp.zeros((), jnp.int32)
+        return Solution(positions=positions, tangents=tangents, angles=angles, moments=moments, curvatures=curvatures,
+                        segment_forces=forces, reactions=reactions, result=row, iterations=jnp.asarray(self.iterations)[i],
+                        steps=zero, cutbacks=zero, residual_norm=jnp.zeros(()), load_factor=jnp.ones(()), state=state,
+                        network=net, model="socb")
+
     def summary(self) -> str:
         """One line: completion, steps, peak force and where."""
-        k = int(np.argmax(self.force)) if self.n_steps else 0
-        peak = f"peak {self.force[k]:.4g} pN at {self.displacement[k]:.4g} µm" if self.n_steps else "no steps"
-        unstable = int(np.sum(~self.stable))
-        return (
-            f"{'completed' if self.completed else 'FAILED: ' + self.status_message}; {self.n_steps} steps "
-            f"({int(self.iterations.sum())} Newton iterations), {peak}, max displacement "
-            f"{self.displacement.max() if self.n_steps else 0:.4g} µm, {len(self.limit_points)} events, "
-            f"{unstable} steps flagged unstable"
-        )
+        force, disp = np.asarray(self.force), np.asarray(self.displacement)
+        k = int(np.argmax(force)) if self.n_steps else 0
+        peak = f"peak {force[k]:.4g} pN at {disp[k]:.4g} µm" if self.n_steps else "no steps"
+        unstable = int(np.sum(~np.asarray(self.stable)))
+        steps = f"{self.n_steps} step{'s' * (self.n_steps != 1)}"
+        iterations = int(np.sum(np.asarray(self.iterations)))
+        events = len(self.limit_points)
+        return (f"{'completed' if self.completed else 'FAILED: ' + self.status_message}; {steps} ({iterations} Newton "
+                f"iteration{'s' * (iterations != 1)}), {peak}, max displacement {disp.max() if self.n_steps else 0:.4g} µm, "
+                f"{events} event{'s' * (events != 1)}, {unstable} step{'s' * (unstable != 1)} flagged unstable")
 
     def __repr__(self) -> str:
-        return f"CompressionResult({self.summary()})"
+        try:
+            return f"CompressionResult({self.summary()})"
+        except Exception:  # noqa: BLE001  (traced: no values to show)
+            return "CompressionResult(traced)"

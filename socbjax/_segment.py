@@ -46,7 +46,8 @@ from jaxtyping import Array, Float
 from ._geometry import sphere_exp, sphere_exp_differential_inverse, sphere_log_jet
 from ._quadrature import SegmentQuadrature
 
-__all__ = ["planar_segment_residual", "spatial_segment_residual", "spatial_segment_tangents", "planar_segment_angles"]
+__all__ = ["planar_segment_residual", "spatial_segment_residual", "spatial_segment_tangents", "planar_segment_angles",
+           "planar_segment_curve", "spatial_segment_curve"]
 
 
 def _cross2(a: Array, b: Array) -> Array:
@@ -63,6 +64,13 @@ def planar_segment_angles(theta_a, m_a, theta_b, m_b, n, length, EI, basis) -> F
         [theta_a, length * m_a / EI, length**2 * curv2_a, theta_b, length * m_b / EI, length**2 * curv2_b]
     )
     return basis @ data
+
+
+def planar_segment_curve(theta_a, m_a, theta_b, m_b, n, length, EI, basis, dbasis):
+    """(θ [K], dθ/ds [K] in 1/µm) at the points tabulated by ``basis`` and its σ-derivative
+    ``dbasis`` ([K, 6] each): the segment's quintic and its curvature."""
+    return (planar_segment_angles(theta_a, m_a, theta_b, m_b, n, length, EI, basis),
+            planar_segment_angles(theta_a, m_a, theta_b, m_b, n, length, EI, dbasis) / length)
 
 
 def planar_segment_residual(
@@ -113,6 +121,15 @@ def spatial_segment_tangents(t_a, m_a, t_b, m_b, n, length, EI, basis) -> Float[
     """Unit tangents at the points tabulated by ``basis`` from the end data."""
     u, _, _, w = _spatial_interpolant(t_a, m_a, t_b, m_b, n, length, EI, basis)
     return jax.vmap(sphere_exp, in_axes=(None, 0))(u, w)
+
+
+def spatial_segment_curve(t_a, m_a, t_b, m_b, n, length, EI, basis, dbasis):
+    """(t [K, 3], dt/ds [K, 3] in 1/µm): unit tangents of the interpolant and their arc-length
+    derivative, t' = D exp_u(w) w', at the points of ``basis`` / ``dbasis``."""
+    u, _, _, w = _spatial_interpolant(t_a, m_a, t_b, m_b, n, length, EI, basis)
+    _, _, _, dw = _spatial_interpolant(t_a, m_a, t_b, m_b, n, length, EI, dbasis)
+    t, dt = jax.vmap(lambda wk, dwk: jax.jvp(lambda z: sphere_exp(u, z), (wk,), (dwk,)))(w, dw)
+    return t, dt / length
 
 
 def spatial_segment_residual(

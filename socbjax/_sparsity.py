@@ -1,11 +1,17 @@
-"""Sparsity of the SOCB Jacobian from the network graph (no probing).
+"""Sparsity of the network Jacobians, and the choice of linear solver for a model.
 
 :func:`socbjax._residual.socb_structure` maps every unknown and residual row to a vertex of
 the network graph (nodes and segments; daughter bases joined to their mother nodes).  A row
 depends only on unknowns within graph distance 2 of its vertex, so that neighbourhood is a
-conservative pattern: a few structural zeros, no missed entries — checked against a random
-directional derivative when the solver is prepared.  This replaces column-by-column probing
-(seconds per thousand unknowns) by three sparse matrix products (milliseconds).
+conservative pattern: a few structural zeros, no missed entries — refined by evaluating the
+Jacobian at random points and checked against a random directional derivative.  This
+replaces column-by-column probing (seconds per thousand unknowns) by three sparse matrix
+products (milliseconds).  The jointed model is probed (:func:`socbjax._linear.sparsity_pattern`).
+
+The pattern depends only on the topology: it is computed once per topology on a *template*
+network (the same topology with random values, loads and couples, so that it holds for any
+values), cached, and reused by every solve, compression, ensemble and fit of that topology —
+also when the actual values are traced.
 """
 
 from __future__ import annotations
@@ -13,18 +19,21 @@ from __future__ import annotations
 import jax
 import jax.numpy as jnp
 import numpy as np
+import scipy.sparse as sp
+from jax.flatten_util import ravel_pytree
 
-from ._linear import SparseJacobianSolver
+from ._linear import ColouredSparseLU, DenseLU, solver_kind, sparsity_pattern
 from ._network import DIFFERENTIABLE_FIELDS
+from ._residual import Control, SOCBModel
 
-__all__ = ["structural_pattern", "prepare_structured"]
+__all__ = ["structural_pattern", "prepare_sparse_solver", "linear_solver_for", "template_model"]
+
+_PREPARED: dict = {}
 
 
 def structural_pattern(structure, radius: int = 2) -> tuple[np.ndarray, np.ndarray]:
     """(rows, cols) [nnz] in CSC order: row r may depend on unknown u when their vertices are
     within ``radius`` of each other in the graph."""
-    import scipy.sparse as sp
-
     unknown_vertex, row_vertex, edges, n_vertices = structure
     n = unknown_vertex.size
     A = sp.coo_matrix((np.ones(len(edges)), (edges[:, 0], edges[:, 1])), shape=(n_vertices, n_vertices))
@@ -40,64 +49,70 @@ def structural_pattern(structure, radius: int = 2) -> tuple[np.ndarray, np.ndarr
     return pattern.indices.astype(np.int64), cols.astype(np.int64)
 
 
-def _solver(rows, cols, n, permc_spec) -> SparseJacobianSolver:
-    return SparseJacobianSolver.from_pattern(rows, cols, n, permc_spec=permc_spec)
+def template_model(model):
+    """``model`` on a network of the same topology with generic concrete values (random
+    lengths, EI, loads and couples; perturbed positions and tangents), for patterns."""
+    rng = np.random.default_rng(7)
+    net = model.network
+    values = {}
+    for name in DIFFERENTIABLE_FIELDS:
+        shape = getattr(net, name).shape
+        v = rng.uniform(0.5, 1.5, shape) if name in ("lengths", "EI") else rng.normal(size=shape)
+        if name == "tangents":
+            v = v / np.linalg.norm(v, axis=-1, keepdims=True)
+        values[name] = jnp.asarray(v)
+    return type(model)(net.replace(**values), *[getattr(model, f) for f in ("quad",) if hasattr(model, f)])
 
 
-_PREPARED: dict = {}
+def _residual_fn(template):
+    """The residual as a function of (flat state, probe_held): one function whose Jacobian at
+    probe_held = ½ has the union pattern of the held and released probe (the settle phase)."""
+    state0 = template.initial_state()
+    x0, unravel = ravel_pytree(state0)
+    frames = template.frames(state0)
+    return x0, lambda y, h: template.residual(unravel(y), Control.make(1.0, 0.3, h), frames)
 
 
-def structure_key(network, *extra) -> str:
-    """A fingerprint of everything in ``network`` that fixes its Jacobian pattern: the
-    topology, supports, probe and the shapes (not the values) of the differentiable arrays."""
-    import hashlib
-
-    h = hashlib.sha256(repr((network.dim, extra)).encode())
-    for name, value in sorted(vars(network).items()):
-        if name in DIFFERENTIABLE_FIELDS:
-            h.update(repr((name, np.shape(value))).encode())
-        elif hasattr(value, "shape"):
-            a = np.asarray(value)
-            h.update(repr((name, a.shape, a.dtype.str)).encode())
-            h.update(np.ascontiguousarray(a != 0 if a.dtype.kind == "f" else a).tobytes())
-    return h.hexdigest()
-
-
-def prepare_structured(fns, x_example, structure, *, permc_spec: str = "COLAMD", cache_key: str | None = None) -> SparseJacobianSolver:
-    """A prepared :class:`SparseJacobianSolver` whose pattern covers ∂f/∂x of every f in
-    ``fns`` (e.g. the settle and the loading residuals, which differ in their probe rows):
-    the graph pattern of ``structure``, coloured, gives each Jacobian at two random points
-    from a few dozen jvps; the union of their non-zeros is the pattern, coloured again.
-    Raises ``RuntimeError`` if the result misses a dependency (checked with a random jvp).
-
-    COLAMD is the default ordering: on SOCB network Jacobians at straight reference states
-    the symmetric minimum-degree ordering (``MMD_AT_PLUS_A``) produced factorisations ~100×
-    slower (measured 3.7 s vs 11 ms for the 8-generation outcrop, n = 6891).
-
-    ``cache_key`` (e.g. from :func:`structure_key`): reuse the solver prepared for the same
-    key (fits and finite differences rebuild the same network structure many times)."""
-    if cache_key is not None and (cache_key, permc_spec) in _PREPARED:
-        return _PREPARED[cache_key, permc_spec]
-    fns = list(fns) if isinstance(fns, (list, tuple)) else [fns]
-    n = int(np.size(x_example))
-    rows, cols = structural_pattern(structure)
-    conservative = _solver(rows, cols, n, permc_spec)
+def _refined(template, x0, fn) -> ColouredSparseLU:
+    """The graph pattern, coloured, evaluated at random points (one compiled program); the
+    non-zeros found, coloured again; checked against an exact directional derivative."""
+    n = x0.size
+    rows, cols = structural_pattern(template.structure())
+    conservative = ColouredSparseLU.from_pattern(rows, cols, n)
+    values = jax.jit(lambda z, h: conservative.values(lambda y: fn(y, h), z))
     rng = np.random.default_rng(1)
+    points = [jnp.asarray(np.asarray(x0) + rng.uniform(-0.3, 0.3, n)) for _ in range(3)]
+    half = jnp.asarray(0.5)
     keep = np.zeros(rows.size, bool)
-    for fn in fns:
-        values = jax.jit(lambda z, fn=fn: conservative.jacobian_values(fn, z))
-        for _ in range(2):
-            keep |= np.asarray(values(jnp.asarray(np.asarray(x_example) + rng.uniform(-0.3, 0.3, n)))) != 0
-    solver = _solver(rows[keep], cols[keep], n, permc_spec)
-    for fn in fns:
-        y = jnp.asarray(np.asarray(x_example) + rng.uniform(-0.3, 0.3, n))
-        v = rng.normal(size=n)
-        exact = np.asarray(jax.jit(lambda z, t, fn=fn: jax.jvp(fn, (z,), (t,))[1])(y, jnp.asarray(v)))  # jit: one compile, not one per op
-        vals = np.asarray(jax.jit(lambda z, fn=fn: solver.jacobian_values(fn, z))(y))
-        approx = np.zeros(n)
-        np.add.at(approx, solver.rows.a, vals * v[solver.cols.a])
-        if not np.allclose(approx, exact, rtol=1e-8, atol=1e-8 * max(1.0, float(np.abs(exact).max()))):
-            raise RuntimeError("the graph sparsity pattern misses dependencies of the residual; use linear_solver='dense'")
-    if cache_key is not None:
-        _PREPARED[cache_key, permc_spec] = solver
+    for z in points[:2]:
+        keep |= np.asarray(values(z, half)) != 0
+    # check: the conservative pattern must carry the whole Jacobian (an exact jvp at a third point)
+    v = rng.normal(size=n)
+    exact = np.asarray(jax.jit(lambda z, t: jax.jvp(lambda y: fn(y, half), (z,), (t,))[1])(points[2], jnp.asarray(v)))
+    approx = np.zeros(n)
+    np.add.at(approx, rows, np.asarray(values(points[2], half)) * v[cols])
+    if not np.allclose(approx, exact, rtol=1e-8, atol=1e-8 * max(1.0, float(np.abs(exact).max()))):
+        raise RuntimeError("the graph sparsity pattern misses dependencies of the residual; use linear_solver='dense'")
+    return ColouredSparseLU.from_pattern(rows[keep], cols[keep], n)
+
+
+def prepare_sparse_solver(model) -> ColouredSparseLU:
+    """The :class:`ColouredSparseLU` for ``model``'s Jacobian (cached per topology)."""
+    key = (model.network.topology, type(model).__name__, getattr(model, "quad", None))
+    if key in _PREPARED:
+        return _PREPARED[key]
+    template = template_model(model)
+    x0, fn = _residual_fn(template)
+    if isinstance(model, SOCBModel):
+        solver = _refined(template, x0, fn)
+    else:
+        rows, cols = sparsity_pattern(lambda y: fn(y, 0.5), x0)
+        solver = ColouredSparseLU.from_pattern(rows, cols, x0.size)
+    _PREPARED[key] = solver
     return solver
+
+
+def linear_solver_for(model, kind: str = "auto"):
+    """:class:`DenseLU` or the prepared :class:`ColouredSparseLU` for ``model`` ("dense",
+    "sparse", or "auto": sparse above 1,500 unknowns).  Host side; works for traced values."""
+    return prepare_sparse_solver(model) if solver_kind(kind, model.n_unknowns) == "sparse" else DenseLU()

@@ -172,11 +172,8 @@ def _simulate(args) -> int:
         raise SystemExit(f"socbjax simulate: the folder of --out does not exist: {out.parent}")
     net, params, default_u = _build(args)
     displacement = default_u if args.displacement is None else args.displacement
-    settings = (
-        sj.PathSettings()
-        if args.max_step is None
-        else sj.PathSettings(max_step=args.max_step, initial_step=min(0.02, args.max_step))
-    )
+    steps = {} if args.max_step is None else dict(max_step=args.max_step, initial_step=min(0.02, args.max_step))
+    settings = sj.PathSettings(linear_solver=args.linear_solver, **steps)
     checkpoint = out.with_name(out.name + ".ckpt.h5")
     print(
         f"socbjax simulate {args.network}: {net.n_nodes} nodes, {net.n_segments} segments, "
@@ -190,11 +187,8 @@ def _simulate(args) -> int:
         method=args.method,
         perturbation=args.perturbation,
         settings=settings,
-        linear_solver=args.linear_solver,
         progress=not args.quiet,
-        checkpoint=checkpoint,
-        checkpoint_every=args.checkpoint_every,
-        resume=args.resume,
+        checkpoint=sj.Checkpoint(checkpoint, every=args.checkpoint_every, resume=args.resume),
         throw=False,
         parameters=params,
     )

@@ -37,3 +37,18 @@ def _release_compiled_code():
 
     jax.clear_caches()
     gc.collect()
+
+
+@pytest.fixture
+def traces():
+    """Names of the functions JAX traces while the test runs (``jax.monitoring``'s public
+    trace event): a cache hit does not trace, so repeated solves must add nothing."""
+    names = []
+
+    def listener(event, duration, **kwargs):
+        if event == "/jax/core/compile/jaxpr_trace_duration":
+            names.append(kwargs.get("fun_name"))
+
+    jax.monitoring.register_event_duration_secs_listener(listener)
+    yield names
+    jax.monitoring.unregister_event_duration_listener(listener)

@@ -78,6 +78,6 @@ def test_systems_are_square(dim, supports):
         disc = sj.make_model(sj.column(4, supports=supports, dim=dim), model)
         state = disc.initial_state()
         x = jax.flatten_util.ravel_pytree(state)[0]
-        r = disc.residual(state, np.zeros((4, dim)), disc.frames(state))
+        r = disc.residual(state, sj.Control.make(), disc.frames(state))
         assert r.shape == x.shape
         np.testing.assert_allclose(r, 0.0, atol=1e-14)  # the unloaded straight state is exact

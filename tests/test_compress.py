@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 import socbjax as sj
-from socbjax import _reference
+from socbjax import testing as _reference
 
 
 def _loading(result):
@@ -84,29 +84,25 @@ def test_probe_force_balances_the_support_reactions():
     np.testing.assert_allclose(result.end_forces[:, 0], result.force, rtol=1e-8, atol=1e-10)
 
 
-def test_checkpoint_resume_gives_the_same_curve(tmp_path, monkeypatch):
+def test_checkpoint_resume_gives_the_same_curve(tmp_path):
     net = sj.column(5, supports=("pinned", "pinned"), dim=2)
     reference = sj.compress(net, 0.25, unload=True)
     ckpt = tmp_path / "run.ckpt.h5"
-    calls = {"n": 0}
-    original = sj._compress._Progress.__call__
+    calls = []
 
-    def interrupt(self, *args, **kwargs):
-        calls["n"] += 1
-        if calls["n"] == 4:
+    def interrupt(phase, u, steps, done):  # the public progress hook, called between chunks
+        calls.append((phase, steps))
+        if len(calls) == 4:
             raise KeyboardInterrupt
-        return original(self, *args, **kwargs)
 
-    monkeypatch.setattr(sj._compress._Progress, "__call__", interrupt)
     with pytest.raises(KeyboardInterrupt):
-        sj.compress(net, 0.25, unload=True, checkpoint=ckpt, checkpoint_every=3)
-    assert ckpt.exists()
-    monkeypatch.setattr(sj._compress._Progress, "__call__", original)
-    resumed = sj.compress(net, 0.25, unload=True, checkpoint=ckpt, checkpoint_every=3, resume=True)
+        sj.compress(net, 0.25, unload=True, checkpoint=sj.Checkpoint(ckpt, every=3), progress=interrupt)
+    assert ckpt.exists() and calls[-1][1] >= 3
+    resumed = sj.compress(net, 0.25, unload=True, checkpoint=sj.Checkpoint(ckpt, every=3, resume=True))
     np.testing.assert_array_equal(resumed.displacement, reference.displacement)
     np.testing.assert_array_equal(resumed.force, reference.force)
     with pytest.raises(ValueError, match="different run"):
-        sj.compress(net, 0.2, unload=True, checkpoint=ckpt, resume=True)
+        sj.compress(net, 0.2, unload=True, checkpoint=sj.Checkpoint(ckpt, resume=True))
 
 
 def test_compress_input_errors():
@@ -115,8 +111,8 @@ def test_compress_input_errors():
         sj.compress(net, 1.5)
     with pytest.raises(ValueError, match="positive"):
         sj.compress(net, -0.1)
-    with pytest.raises(ValueError, match="resume"):
-        sj.compress(net, 0.1, resume=True)
+    with pytest.raises(ValueError, match="every"):
+        sj.compress(net, 0.1, checkpoint=sj.Checkpoint("run.h5", every=0))
     with pytest.raises(ValueError, match="method"):
         sj.compress(net, 0.1, method="newton")
     with pytest.raises(TypeError, match="Network"):
@@ -146,8 +142,8 @@ def test_unit_mesh_buckles_collapses_and_recovers():
 def test_outcrop_sparse_and_dense_paths_agree_and_balance():
     net = sj.dendritic_outcrop(generations=5, gap=3.0, dim=2, seed=2)
     assert len(np.asarray(net.position_projector)) == net.n_nodes
-    dense = sj.compress(net, 0.5, method="arclength", linear_solver="dense")
-    sparse = sj.compress(net, 0.5, method="arclength", linear_solver="sparse")
+    dense = sj.compress(net, 0.5, method="arclength", settings=sj.PathSettings(linear_solver="dense"))
+    sparse = sj.compress(net, 0.5, method="arclength", settings=sj.PathSettings(linear_solver="sparse"))
     assert dense.completed and sparse.completed and dense.n_steps == sparse.n_steps
     np.testing.assert_allclose(sparse.force, dense.force, rtol=1e-8, atol=1e-12)
     np.testing.assert_array_equal(sparse.stable, dense.stable)
@@ -162,14 +158,11 @@ def test_outcrop_sparse_and_dense_paths_agree_and_balance():
 def test_unit_mesh_in_3d_equals_the_planar_mesh():
     """With the same in-plane perturbation the 3D mesh follows the planar curve (with a
     random, out-of-plane perturbation it buckles out of the branch plane, at lower force)."""
-    import equinox as eqx
-    import jax.numpy as jnp
-
     mesh2, mesh3 = sj.unit_dendritic_mesh(dim=2), sj.unit_dendritic_mesh(dim=3)
-    loads2 = sj.strand_perturbation(mesh2, 1e-4)
+    loads2 = np.asarray(sj.strand_perturbation(mesh2, 1e-4))
     loads3 = np.zeros((mesh3.n_nodes, 3))
     loads3[:, [0, 2]] = loads2  # planar (x, y) -> spatial (x, z)
-    mesh3 = eqx.tree_at(lambda n: n.loads, mesh3, jnp.asarray(loads3))
+    mesh3 = mesh3.replace(loads=loads3)
     planar = sj.compress(mesh2, 0.4, method="arclength", perturbation=1e-4)
     spatial = sj.compress(mesh3, 0.4, method="arclength")
     assert spatial.completed

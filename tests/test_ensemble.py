@@ -63,20 +63,16 @@ def test_force_scales_with_EI(outcrop_ensemble):
     np.testing.assert_allclose(ens.displacement, ens.displacement[[1]].repeat(len(SCALES), 0), atol=1e-12)
 
 
-def test_new_values_do_not_recompile(outcrop_ensemble, monkeypatch):
+def test_new_values_do_not_recompile(outcrop_ensemble, traces):
     """All phases share one compiled program; new EI, loads and displacement reuse it, a new
     batch size traces once more (which shows that the counter is live)."""
-    from socbjax import _ensemble
-
-    traces = []
-    body = _ensemble._phase_body
-    monkeypatch.setattr(_ensemble, "_phase_body", lambda *a, **k: traces.append(1) or body(*a, **k))
     nets = _scaled(_outcrop(), (0.7, 1.3, 3.0))
-    nets[1] = eqx.tree_at(lambda n: n.loads, nets[1], sj.strand_perturbation(nets[1], 2e-4))
+    nets[1] = nets[1].replace(loads=sj.strand_perturbation(nets[1], 2e-4))
+    before = len(traces)
     assert sj.compress_ensemble(nets, 0.4, **KW).completed.all()
-    assert len(traces) == 0
+    assert "_phase" not in traces[before:], traces[before:]
     assert sj.compress_ensemble(nets[:2], 0.4, **KW).completed.all()
-    assert len(traces) == 1
+    assert "_phase" in traces[before:]
 
 
 def _pinned_pinned_force(shortening, L, EI):
@@ -113,7 +109,8 @@ def test_progress_runs_in_chunks_with_the_same_curves(capsys):
     np.testing.assert_array_equal(plain.n_steps, chunked.n_steps)
     np.testing.assert_allclose(chunked.force, plain.force, rtol=1e-12, atol=1e-15)
     np.testing.assert_array_equal(chunked.attempts, plain.attempts)  # [B, phases]: work per member
-    assert (plain.attempts.sum(axis=1) >= plain.n_steps - 1).all() and (plain.newton_iterations >= plain.attempts).all()
+    assert (plain.attempts.sum(axis=1) >= plain.n_steps - 1).all()  # every recorded step was attempted
+    assert (plain.newton_iterations >= 0).all() and (plain.newton_iterations[:, 1] > 0).all()  # (a linear settle may need none)
 
 
 def test_failed_members_raise_or_report():
@@ -122,9 +119,9 @@ def test_failed_members_raise_or_report():
     with pytest.raises(sj.ConvergenceError, match=r"2 of 2 members did not complete.*member 0.*member 1") as info:
         sj.compress_ensemble(nets, 0.2, settings=settings)
     ens = info.value.result
-    assert not ens.completed.any() and (ens.status == sj.Status.MAX_STEPS).all()
+    assert not ens.completed.any() and all(r.result == sj.RESULTS.max_steps for r in ens.results)
     again = sj.compress_ensemble(nets, 0.2, settings=settings, throw=False)
-    assert (again.status == sj.Status.MAX_STEPS).all() and (again.n_steps <= 5).all()
+    assert all(r.result == sj.RESULTS.max_steps for r in again.results) and (again.n_steps <= 5).all()
 
 
 def test_input_errors():
@@ -135,9 +132,9 @@ def test_input_errors():
         sj.compress_ensemble(col, 0.1)
     with pytest.raises(TypeError, match="member 1"):
         sj.compress_ensemble([col, "column"], 0.1)
-    with pytest.raises(ValueError, match=r"member 1 differs from member 0 in the shape of .*topology"):
+    with pytest.raises(ValueError, match=r"member 1 differs from member 0 in its topology \(segments\)"):
         sj.compress_ensemble([col, sj.column(6, supports=("pinned", "pinned"), dim=2)], 0.1)
-    with pytest.raises(ValueError, match=r"member 1 differs from member 0 in clamped"):
+    with pytest.raises(ValueError, match=r"member 1 differs from member 0 in its topology \(clamped\)"):
         sj.compress_ensemble([col, sj.column(5, supports=("clamped", "pinned"), dim=2)], 0.1)
     with pytest.raises(ValueError, match=r"one per member \(2\)"):
         sj.compress_ensemble([col, col], 0.1, perturbation=[1e-4, 1e-4, 1e-4])
@@ -157,7 +154,7 @@ _SHARDED = textwrap.dedent("""
         nets, u, kw = [eqx.tree_at(lambda n: n.EI, net, net.EI * s) for s in (0.5, 1.0, 2.0)], 0.5, {}
     else:  # the sparse LU is a jax.pure_callback: it must run on every device too
         nets = [sj.column(5, supports=("pinned", "pinned"), dim=2, EI=EI) for EI in (0.05, 0.07, 0.1)]
-        u, kw = 0.2, dict(linear_solver="sparse")
+        u, kw = 0.2, dict(settings=sj.PathSettings(linear_solver="sparse"))
     one = sj.compress_ensemble(nets, u, unload=True, **kw)
     two = sj.compress_ensemble(nets, u, unload=True, devices=jax.devices(), **kw)
     print(json.dumps(dict(n_devices=len(jax.devices()), devices=list(two.devices), one_devices=list(one.devices),

@@ -1,10 +1,9 @@
 """Figures of a compression path on hand-built results: the right artists, labels with
 units, default step choices, atomic PNG output, no pyplot windows."""
 
+import dataclasses
 import os
 
-import equinox as eqx
-import jax.numpy as jnp
 import matplotlib.pyplot as plt
 import numpy as np
 import pytest
@@ -12,7 +11,7 @@ from matplotlib.figure import Figure
 
 import socbjax as sj
 from socbjax import _figures
-from socbjax._result import CompressionResult, LimitPoint
+from socbjax import CompressionResult, LimitPoint
 
 N_LOAD = 31  # settle step + 30 loading steps, u = 0.02 j µm
 
@@ -29,8 +28,7 @@ def path_result(dim=3, E=8, unload=True, N=4):
         u, F = np.concatenate([u, u_back]), np.concatenate([F, 0.7 * u_back])
         phase = np.concatenate([phase, np.full(10, 2)])
     K, S = len(u), N - 1
-    net = sj.column(N, dim=dim)
-    net = eqx.tree_at(lambda n: n.probe, net, jnp.arange(N) == N - 1)
+    net = sj.probe_network(sj.column(N, dim=dim))
     ref = np.asarray(net.positions)
     bulge = np.zeros((N, dim))
     bulge[:, 1] = np.sin(np.pi * np.arange(N) / (N - 1))
@@ -49,13 +47,12 @@ def path_result(dim=3, E=8, unload=True, N=4):
         end_nodes=np.arange(E) % N,
         end_forces=F[:, None] * weights[None, :],
         iterations=np.full(K, 3),
-        limit_points=[
+        limit_points=(
             LimitPoint("force_maximum", 16, 0.32, 1.0, "loading"),
             LimitPoint("force_minimum", 24, 0.48, 0.36, "loading"),
-        ],
-        status=0,
+        ),
+        result=sj.RESULTS.successful,
         network=net,
-        parameters={},
     )
 
 
@@ -85,7 +82,7 @@ def test_force_curve_loading_unloading_unstable_and_limit_points():
 
     result = path_result(unload=False)
     result.stable[:] = True
-    result.limit_points = []
+    result = dataclasses.replace(result, limit_points=())
     ax = sj.plot_force_curve(result).axes[0]
     assert labels(ax) == ["loading"] and len(ax.texts) == 0
 
@@ -151,8 +148,8 @@ def test_end_forces_at_loading_regimes():
 def test_loading_regimes_without_post_peak_steps():
     result = path_result(unload=False)
     keep = np.arange(17)
-    for name in ("displacement", "force", "converged", "stable", "phase", "positions", "end_forces", "iterations"):
-        setattr(result, name, getattr(result, name)[keep])
+    names = ("displacement", "force", "converged", "stable", "phase", "positions", "end_forces", "iterations")
+    result = dataclasses.replace(result, **{name: getattr(result, name)[keep] for name in names})
     assert _figures.loading_regimes(result) == {"pre-stress": 2, "linear": 8, "peak": 16}
 
 

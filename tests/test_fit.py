@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 import socbjax as sj
-from socbjax._models import ColumnModel, UnitMeshModel
+from socbjax import ColumnModel, UnitMeshModel
 
 TRUTH = {"EI": 0.071, "branch_angle": 70.0}
 
@@ -70,7 +70,8 @@ def test_optax_optimisers_reach_the_least_squares_EI(optimizer):
     f0 = np.asarray(sj.compress(model.network({"EI": 0.071}), 0.3, at=c).force)
     best = 0.071 * float(F @ f0) / float(f0 @ f0)
     kwargs = {"learning_rate": 0.1, "max_iterations": 150} if optimizer == "adam" else {"max_iterations": 30}
-    result = sj.fit((c, F), model, free="EI", initial={"EI": 0.05}, optimizer=optimizer, tolerance=1e-12, **kwargs)
+    result = sj.fit((c, F), model, free="EI", initial={"EI": 0.05},
+                    settings=sj.FitSettings(optimizer=optimizer, tolerance=1e-12, **kwargs))
     assert result.values["EI"] == pytest.approx(best, rel=2e-3)
     lm = sj.fit((c, F), model, free="EI", initial={"EI": 0.05})
     # LM stops on a relative loss decrease of 1e-8: far inside the standard error (~1 %)
@@ -87,7 +88,7 @@ def test_EI_and_force_scale_are_refused_together():
         sj.fit((c, F), model, free=("EI_mother", "EI_daughter", "force_scale"), fixed={})
     # one group free and the other fixed is not degenerate: accepted up to the data check
     problem = sj.fit_problem((c, F), model, free=("EI_mother", "force_scale"), fixed={"EI_daughter": 0.07})
-    assert problem["free"] == ("EI_mother", "force_scale")
+    assert problem.free == ("EI_mother", "force_scale")
 
 
 def test_correlated_parameters_are_reported_not_identifiable():
@@ -96,7 +97,7 @@ def test_correlated_parameters_are_reported_not_identifiable():
     model = ColumnModel(4, supports=("pinned", "pinned"))
     c = np.linspace(0.25, 0.3, 8)  # a short piece of the plateau only
     F = _synthetic(model, {"EI": 0.071}, c, seed=5, noise=0.0, displacement=0.35)
-    result = sj.fit((c, F), model, free=("EI", "baseline"), initial={"EI": 0.06}, max_iterations=10)
+    result = sj.fit((c, F), model, free=("EI", "baseline"), initial={"EI": 0.06}, settings=sj.FitSettings(max_iterations=10))
     assert not result.identifiable and any("correlated" in w for w in result.warnings)
 
 
@@ -132,7 +133,7 @@ def test_bad_input_is_refused_with_clear_messages():
     with pytest.raises(ValueError, match="outside its bounds"):
         sj.fit((c, F), "unit-mesh", free=("branch_angle",), initial={"branch_angle": 95.0})
     with pytest.raises(ValueError, match="optimizer"):
-        sj.fit((c, F), "column", optimizer="newton")
+        sj.fit((c, F), "column", settings=sj.FitSettings(optimizer="newton"))
     with pytest.raises(ValueError, match="unknown model"):
         sj.fit((c, F), "spring")
     with pytest.raises(ValueError, match="no parameter"):
@@ -144,7 +145,7 @@ def test_unloading_branch_fit():
     model = ColumnModel(4, supports=("pinned", "pinned"))
     c = np.linspace(0.02, 0.2, 6)
     F = _synthetic(model, {"EI": 0.08}, c, seed=1, noise=0.0)
-    result = sj.fit((c, F), model, free="EI", initial={"EI": 0.05}, branch="unloading")
+    result = sj.fit((c, F), model, free="EI", initial={"EI": 0.05}, settings=sj.FitSettings(branch="unloading"))
     assert result.values["EI"] == pytest.approx(0.08, rel=1e-5)
     with pytest.raises(ValueError, match="branch"):
-        sj.fit((c, F), model, branch="retract")
+        sj.fit((c, F), model, settings=sj.FitSettings(branch="retract"))

@@ -11,8 +11,7 @@ import numpy as np
 import pytest
 
 import socbjax as sj
-from socbjax import _io
-from socbjax._result import CompressionResult, LimitPoint
+from socbjax import CompressionResult, LimitPoint
 
 
 def make_result(dim=3, K=7, N=4, E=1, seed=0):
@@ -34,13 +33,14 @@ def make_result(dim=3, K=7, N=4, E=1, seed=0):
         end_nodes=np.arange(E, dtype=np.int32),
         end_forces=rng.normal(size=(K, E)),
         iterations=rng.integers(1, 9, size=K).astype(np.int32),
-        limit_points=[
+        limit_points=(
             LimitPoint("force_maximum", 3, 0.3, 1.25, "loading"),
             LimitPoint("bifurcation", 5, 0.5, -0.5, "unloading"),
-        ],
-        status=int(sj.Status.MAX_STEPS),
+        ),
+        result=sj.RESULTS.max_steps,
         network=net,
-        parameters={"u_max": 0.6, "method": "arclength", "nested": {"list": [1, 2.5, "µm"], "flag": True, "none": None}},
+        parameters_json=json.dumps({"u_max": 0.6, "method": "arclength",
+                                    "nested": {"list": [1, 2.5, "µm"], "flag": True, "none": None}}),
     )
 
 
@@ -48,13 +48,15 @@ def assert_results_equal(a, b):
     for field in dataclasses.fields(CompressionResult):
         x, y = getattr(a, field.name), getattr(b, field.name)
         if field.name == "network":
-            for nf in dataclasses.fields(x):
-                u, v = getattr(x, nf.name), getattr(y, nf.name)
-                if nf.name == "dim":
-                    assert u == v and type(v) is int
-                else:
-                    assert np.asarray(u).dtype == np.asarray(v).dtype, nf.name
-                    np.testing.assert_array_equal(np.asarray(u), np.asarray(v))
+            assert x.topology == y.topology and y.dim == x.dim and type(y.dim) is int
+            for name in ("positions", "tangents", "lengths", "EI", "loads", "couples"):
+                u, v = np.asarray(getattr(x, name)), np.asarray(getattr(y, name))
+                assert u.dtype == v.dtype and u.shape == v.shape, name
+                np.testing.assert_array_equal(u, v)
+        elif field.name == "result":
+            assert bool(x == y)
+        elif field.name == "parameters_json":
+            assert json.loads(x) == json.loads(y)
         elif isinstance(x, np.ndarray):
             assert x.dtype == y.dtype and x.shape == y.shape, field.name
             np.testing.assert_array_equal(x, y)
@@ -83,9 +85,9 @@ def test_file_layout_units_and_stamps(tmp_path):
     path = sj.save(result, tmp_path / "run.h5")
     with h5py.File(path, "r") as f:
         assert f.attrs["format"] == "socbjax.compression"
-        assert f.attrs["format_version"] == 1
+        assert f.attrs["format_version"] == 2
         assert f.attrs["socbjax_version"] == sj.__version__
-        assert "created" in f.attrs and f.attrs["status"] == int(sj.Status.MAX_STEPS)
+        assert "created" in f.attrs and f.attrs["result"] == "max_steps"
         assert f["units"].attrs["displacement"] == "µm" and f["units"].attrs["moments"] == "pN·µm"
         assert f["path/force"].attrs["units"] == "pN"
         assert f["network"].attrs["dim"] == 3
@@ -93,8 +95,7 @@ def test_file_layout_units_and_stamps(tmp_path):
 
 
 def test_large_arrays_compressed_and_empty_limit_points(tmp_path):
-    result = make_result(K=400, N=12, E=0)
-    result.limit_points = []
+    result = dataclasses.replace(make_result(K=400, N=12, E=0), limit_points=())
     path = sj.save(result, tmp_path / "big.h5")
     with h5py.File(path, "r") as f:
         assert f["path/positions"].compression == "gzip"
@@ -140,12 +141,11 @@ def test_failure_mid_write_keeps_previous_file_and_no_temporaries(tmp_path, monk
 
 
 def test_bad_parameters_fail_before_writing(tmp_path):
-    result = make_result()
-    result.parameters = {"f": object()}
+    result = dataclasses.replace(make_result(), parameters_json='{"f": NaN')  # not JSON
     with pytest.raises(TypeError, match="JSON"):
         sj.save(result, tmp_path / "run.h5")
     assert os.listdir(tmp_path) == []
-    result.parameters = {"n": np.int64(3), "x": np.float32(0.5), "a": np.arange(2)}
+    result = dataclasses.replace(make_result(), parameters_json=json.dumps({"n": 3, "x": 0.5, "a": [0, 1]}))
     assert sj.load(sj.save(result, tmp_path / "run.h5")).parameters == {"n": 3, "x": 0.5, "a": [0, 1]}
 
 
@@ -174,7 +174,7 @@ def test_foreign_and_future_files_rejected(tmp_path):
     with pytest.raises(ValueError, match="socbjax.compression file"):
         sj.load_checkpoint(path)
     with h5py.File(path, "a") as f:
-        f.attrs["format_version"] = 2
+        f.attrs["format_version"] = 3
     with pytest.raises(ValueError, match="newer socbjax"):
         sj.load(path)
 
@@ -204,7 +204,7 @@ def test_checkpoint_round_trip_is_bitwise(tmp_path, rng):
         assert isinstance(got, np.ndarray) and got.dtype == value.dtype and got.shape == value.shape, name
         assert got.tobytes() == value.tobytes(), name
     with h5py.File(path, "r") as f:
-        assert f.attrs["format"] == "socbjax.checkpoint" and f.attrs["format_version"] == 1
+        assert f.attrs["format"] == "socbjax.checkpoint" and f.attrs["format_version"] == 2
     with pytest.raises(ValueError, match="socbjax.checkpoint file"):
         sj.load(path)
 
@@ -217,7 +217,7 @@ def test_checkpoint_overwrite_failure_and_bad_input(tmp_path, monkeypatch):
     def boom(*args, **kwargs):
         raise KeyboardInterrupt
 
-    monkeypatch.setattr(_io, "_dataset", boom)
+    monkeypatch.setattr(h5py.Group, "create_dataset", boom)
     with pytest.raises(KeyboardInterrupt):
         sj.save_checkpoint(path, {"a": np.arange(4)}, {"step": 2})
     monkeypatch.undo()
@@ -245,3 +245,15 @@ def test_reads_files_of_the_first_0_1_0_layout(tmp_path):
         f.create_group("arrays")["carry|X"] = np.arange(3.0)
     arrays, meta = sj.load_checkpoint(ck)
     assert meta == {"i": 1} and list(arrays) == ["carry/X"] and arrays["carry/X"].tolist() == [0.0, 1.0, 2.0]
+
+
+def test_reads_format_version_1_results(tmp_path):
+    """Format 1 (socbjax 0.1): an integer status, no nodal couples, no leaving_segment."""
+    result = make_result()
+    path = sj.save(result, tmp_path / "run.h5")
+    with h5py.File(path, "a") as f:
+        f.attrs["format_version"] = 1
+        del f.attrs["result"]
+        f.attrs["status"] = 6  # MAX_STEPS in socbjax 0.1
+        del f["network/couples"], f["network/leaving_segment"]
+    assert_results_equal(result, sj.load(path))

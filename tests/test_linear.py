@@ -1,13 +1,32 @@
-"""Dense and colour-compressed sparse Jacobian solvers (socbjax._linear)."""
+"""The lineax solvers of socbjax: DenseLU and the colour-compressed ColouredSparseLU
+(solutions, transposed solves and determinant signs against numpy; patterns and colourings
+against dense Jacobians), and the Bordered solver of path following."""
 
 import equinox as eqx
 import jax
 import jax.numpy as jnp
+import lineax as lx
 import numpy as np
+import optimistix as optx
 import pytest
 import scipy.sparse as sp
 
-from socbjax import _linear as L
+import socbjax as sj
+
+
+def solve(solver, fn, x, rhs, transpose=False):
+    """X = J⁻¹ rhs (J⁻ᵀ if transpose) for rhs [n, k] and sign(det J), through the lineax
+    solver interface (init, transpose, compute), several right-hand sides under vmap."""
+    operator = lx.JacobianLinearOperator(lambda y, _: fn(y), x)
+    state = solver.init(operator, {})
+    if transpose:
+        state, _ = solver.transpose(state, {})
+    X, _, stats = jax.vmap(lambda b: solver.compute(state, b, {}), out_axes=(1, None, 0))(rhs.T)
+    return X, stats["sign"][0]
+
+
+def prepare(fn, x):
+    return sj.ColouredSparseLU.probe(fn, x)
 
 
 def tree_function(m: int, b: int = 6, seed: int = 0, flip=()):
@@ -42,7 +61,7 @@ def point(n, seed=1):
 def case():
     fn = tree_function(60)  # n = 360
     x = point(360)
-    return fn, x, L.SparseJacobianSolver().prepare(fn, x)
+    return fn, x, prepare(fn, x)
 
 
 def test_pattern_equals_dense_nonzeros(case):
@@ -93,23 +112,15 @@ def test_colouring_of_irregular_pattern():
     A = (sp.random(n, n, density=0.01, random_state=4) + sp.eye(n)).tocsc()
     A.sort_indices()
     rows, cols = A.indices.astype(np.int32), np.repeat(np.arange(n), np.diff(A.indptr)).astype(np.int32)
-    colors = L.color_columns(rows, cols, n, seed=int(rng.integers(100)))
+    colors = sj.ColouredSparseLU.from_pattern(rows, cols, n, seed=int(rng.integers(100))).colors.a
     pairs = rows.astype(np.int64) * (colors.max() + 1) + colors[cols]
     assert np.unique(pairs).size == pairs.size
 
 
-def test_from_pattern_matches_prepare(case):
+def test_from_pattern_matches_probe(case):
     solver = case[2]
-    again = L.SparseJacobianSolver.from_pattern(solver.rows.a, solver.cols.a, solver.n)
+    again = sj.ColouredSparseLU.from_pattern(solver.rows.a, solver.cols.a, solver.n)
     assert again == solver and hash(again) == hash(solver)
-
-
-def test_permutation_sign():
-    rng = np.random.default_rng(0)
-    for n in (1, 2, 5, 17, 64):
-        for _ in range(5):
-            p = rng.permutation(n)
-            assert L._perm_sign(p) == round(np.linalg.det(np.eye(n)[p]))
 
 
 @pytest.mark.parametrize("transpose", [False, True])
@@ -118,8 +129,8 @@ def test_sparse_and_dense_solve_match_numpy(case, transpose):
     J = np.asarray(jax.jacfwd(fn)(x))
     rhs = jnp.asarray(np.random.default_rng(2).standard_normal((x.size, 3)))
     ref = np.linalg.solve(J.T if transpose else J, np.asarray(rhs))
-    for s in (solver, L.DenseJacobianSolver().prepare(fn, x)):
-        X, sign = jax.jit(lambda x, r, s=s: s.solve(fn, x, r, transpose=transpose))(x, rhs)
+    for s in (solver, sj.DenseLU()):
+        X, sign = jax.jit(lambda x, r, s=s: solve(s, fn, x, r, transpose))(x, rhs)
         assert X.shape == rhs.shape and X.dtype == jnp.float64
         assert np.max(np.abs(X - ref)) <= 1e-10 * np.max(np.abs(ref))
         assert sign == np.linalg.slogdet(J)[0]
@@ -132,9 +143,9 @@ def test_determinant_sign(flip):
     sign_ref = np.linalg.slogdet(np.asarray(jax.jacfwd(fn)(x)))[0]
     assert sign_ref == (-1.0) ** len(flip)  # the unflipped J (4 I + small) has det > 0
     rhs = jnp.ones((150, 1))
-    for s in (L.SparseJacobianSolver().prepare(fn, x), L.DenseJacobianSolver()):
+    for s in (prepare(fn, x), sj.DenseLU()):
         for transpose in (False, True):
-            sign = jax.jit(lambda x, s=s, t=transpose: s.solve(fn, x, rhs, transpose=t)[1])(x)
+            sign = jax.jit(lambda x, s=s, t=transpose: solve(s, fn, x, rhs, t)[1])(x)
             assert float(sign) == sign_ref
 
 
@@ -145,26 +156,17 @@ def test_singular_and_nonfinite_give_nan_and_zero_sign():
     for fn in (lambda x: g(x.at[3].set(0.0)),  # zero column: structurally singular
                lambda x: g(x).at[7].set(0.0)):  # zero row
         # (a numerically singular J, e.g. two equal rows, leaves a rounding-size pivot, as in LAPACK)
-        solver = L.SparseJacobianSolver().prepare(fn, x)
-        X, sign = jax.jit(lambda x, s=solver, fn=fn: s.solve(fn, x, rhs))(x)
+        solver = prepare(fn, x)
+        X, sign = jax.jit(lambda x, s=solver, fn=fn: solve(s, fn, x, rhs))(x)
         assert np.all(np.isnan(X)) and sign == 0.0
-        assert jax.jit(lambda x, fn=fn: L.DenseJacobianSolver().solve(fn, x, rhs)[1])(x) == 0.0
-    solver = L.SparseJacobianSolver().prepare(g, x)
-    X, sign = jax.jit(lambda x: solver.solve(g, x, rhs))(x.at[0].set(jnp.nan))
+        assert jax.jit(lambda x, fn=fn: solve(sj.DenseLU(), fn, x, rhs)[1])(x) == 0.0
+    solver = prepare(g, x)
+    X, sign = jax.jit(lambda x: solve(solver, g, x, rhs))(x.at[0].set(jnp.nan))
     assert np.all(np.isnan(X)) and sign == 0.0
 
 
-def _newton(solver, fn, x0, iters=20):
-    def body(c):
-        x, k, _ = c
-        dx, _ = solver.solve(fn, x, fn(x)[:, None])
-        return x - dx[:, 0], k + 1, jnp.max(jnp.abs(dx))
-
-    return jax.lax.while_loop(lambda c: (c[1] < iters) & (c[2] > 1e-13), body, (x0, 0, jnp.inf))
-
-
 @pytest.mark.parametrize("kind", ["dense", "sparse"])
-def test_newton_in_while_loop(kind):
+def test_newton_with_each_solver(kind):
     g = tree_function(50)
     x_star = point(300, seed=11)
     target = g(x_star)
@@ -173,9 +175,11 @@ def test_newton_in_while_loop(kind):
         return g(x) - target
 
     x0 = x_star + 0.2 * point(300, seed=12)
-    solver = L.jacobian_solver(kind, 300).prepare(fn, x0)
-    x, k, _ = jax.jit(lambda x0: _newton(solver, fn, x0))(x0)
-    assert int(k) < 20 and np.max(np.abs(x - x_star)) < 1e-10
+    inner = sj.DenseLU() if kind == "dense" else prepare(fn, x0)
+    newton = sj.DampedNewton(atol=1e-13, linear_solver=inner)
+    sol = jax.jit(lambda x0: optx.root_find(lambda y, _: fn(y), newton, x0, throw=False))(x0)
+    assert sol.state.result == sj.RESULTS.successful and int(sol.state.iterations) < 20
+    assert np.max(np.abs(sol.value - x_star)) < 1e-10
 
 
 def test_filter_jit_argument_and_vmap(case):
@@ -183,14 +187,14 @@ def test_filter_jit_argument_and_vmap(case):
     traces = []
 
     @eqx.filter_jit
-    def solve(s, xs, rhs):
+    def batched(s, xs, rhs):
         traces.append(1)
-        return jax.vmap(lambda x: s.solve(fn, x, rhs))(xs)
+        return jax.vmap(lambda x: solve(s, fn, x, rhs))(xs)
 
     xs = jnp.stack([x, point(360, seed=3), point(360, seed=4)])
     rhs = jnp.asarray(np.random.default_rng(6).standard_normal((360, 2)))
-    X, signs = solve(solver, xs, rhs)
-    solve(L.SparseJacobianSolver().prepare(fn, x), xs, rhs)  # equal static data: no retrace
+    X, signs = batched(solver, xs, rhs)
+    batched(prepare(fn, x), xs, rhs)  # equal static data: no retrace
     assert len(traces) == 1 and X.shape == (3, 360, 2) and signs.shape == (3,)
     for i in range(3):
         J = np.asarray(jax.jacfwd(fn)(xs[i]))
@@ -199,28 +203,41 @@ def test_filter_jit_argument_and_vmap(case):
         assert signs[i] == np.linalg.slogdet(J)[0]
 
 
-def test_factory_and_unprepared():
-    assert isinstance(L.jacobian_solver("auto", 1500), L.DenseJacobianSolver)
-    assert isinstance(L.jacobian_solver("auto", 1501), L.SparseJacobianSolver)
-    assert isinstance(L.jacobian_solver("dense", 10**5), L.DenseJacobianSolver)
-    assert isinstance(L.jacobian_solver("sparse", 10), L.SparseJacobianSolver)
-    with pytest.raises(ValueError):
-        L.jacobian_solver("cholesky", 10)
-    with pytest.raises(ValueError, match="prepare"):
-        L.SparseJacobianSolver().solve(jnp.sin, jnp.ones(3), jnp.ones((3, 1)))
+def test_auto_choice_and_bordered_solver():
+    small, large = sj.make_model(sj.cantilever(5, dim=2)), sj.make_model(sj.cantilever(400, dim=2))
+    assert isinstance(sj.linear_solver_for(small, "auto"), sj.DenseLU)
+    assert isinstance(sj.linear_solver_for(large, "auto"), sj.ColouredSparseLU)  # 2,398 unknowns > 1,500
+    assert isinstance(sj.linear_solver_for(large, "dense"), sj.DenseLU)
+    with pytest.raises(ValueError, match="linear_solver"):
+        sj.linear_solver_for(small, "cholesky")
+    # Bordered: [[J, c], [aᵀ, b]] solved by elimination equals the dense augmented solve
+    fn = tree_function(8)
+    x = point(48, seed=2)
+    c, a, b = point(48, seed=3), point(48, seed=4), 0.7
+    J = np.asarray(jax.jacfwd(fn)(x))
+    aug = np.block([[J, np.asarray(c)[:, None]], [np.asarray(a)[None, :], np.array([[b]])]])
+    operator = lx.JacobianLinearOperator(lambda y, _: jnp.concatenate([fn(y[:-1]) + y[-1] * c, (a @ y[:-1] + b * y[-1])[None]]),
+                                         jnp.concatenate([x, jnp.zeros(1)]))
+    for inner in (sj.DenseLU(), prepare(fn, x)):
+        solver = sj.Bordered(inner)
+        rhs = point(49, seed=5)
+        sol = lx.linear_solve(operator, rhs, solver, options={"border": (a, jnp.asarray(b))})
+        np.testing.assert_allclose(sol.value, np.linalg.solve(aug, np.asarray(rhs)), rtol=1e-10, atol=1e-12)
+        np.testing.assert_allclose(sol.stats["tangent"], np.linalg.solve(J, np.asarray(c)), rtol=1e-10, atol=1e-12)
+        assert float(sol.stats["sign"]) == np.linalg.slogdet(J)[0]
 
 
 @pytest.mark.slow
 def test_large_tree_n2000():
     fn = tree_function(334, seed=2)  # n = 2004
     x = point(2004, seed=8)
-    solver = L.SparseJacobianSolver().prepare(fn, x)
+    solver = prepare(fn, x)
     J = np.asarray(jax.jacfwd(fn)(x))
     assert solver.nnz == np.count_nonzero(J)
     assert solver.n_colors <= 1.5 * np.count_nonzero(J, axis=1).max()
     rhs = jnp.asarray(np.random.default_rng(9).standard_normal((2004, 4)))
     for transpose in (False, True):
-        X, sign = jax.jit(lambda x, r, t=transpose: solver.solve(fn, x, r, transpose=t))(x, rhs)
+        X, sign = jax.jit(lambda x, r, t=transpose: solve(solver, fn, x, r, t))(x, rhs)
         ref = np.linalg.solve(J.T if transpose else J, np.asarray(rhs))
         assert np.max(np.abs(X - ref)) <= 1e-10 * np.max(np.abs(ref))
         assert sign == np.linalg.slogdet(J)[0]

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 import socbjax as sj
-from socbjax._models import ColumnModel, OutcropModel, UnitMeshModel, _branch_orders
+from socbjax import ColumnModel, OutcropModel, UnitMeshModel
 
 
 def test_unit_mesh_geometry_at_its_own_angle_equals_the_builder():
@@ -52,8 +52,9 @@ def test_stiffness_groups():
     outcrop = OutcropModel(generations=4, gap=3.0, dim=3, seed=0)
     masks = np.array(list(outcrop.groups.values()))
     assert np.all(masks.sum(axis=0) == 1)  # every segment in exactly one branching order
-    order = _branch_orders(outcrop.base)
-    assert order[0] == 0 and order.max() == len(outcrop.groups) - 1
+    strand = np.asarray(outcrop.base.strand)
+    assert outcrop.groups["EI_gen0"][strand == 0].all() and not outcrop.groups["EI_gen0"][strand != 0].any()
+    assert list(outcrop.groups) == [f"EI_gen{k}" for k in range(4)]  # 4 generations: orders 0..3
 
 
 def test_column_model_and_errors():

@@ -1,47 +1,100 @@
-"""Path following on a scalar S-curve with two folds: x³ − 3x = 6p − 3.
+"""The path engine (socbjax.follow_path): natural-parameter and pseudo-arclength
+continuation on a scalar S-curve with two folds, x³ − 3x = 6p − 3 (independent reference:
+the cubic itself), and the load ramp of socbjax.solve: cut-back, budgets, branch tracking.
 
-Natural-parameter (displacement) control must stop at the first fold (p = 5/6) with
-``Status.CRITICAL_POINT`` and never record a jump; pseudo-arclength must follow the path
-through both folds (p turns back to 1/6, then reaches 1) with every point on the curve."""
+Natural-parameter control must stop at the first fold (p = 5/6) with ``RESULTS.fold`` and
+never record a jump; pseudo-arclength must follow the path through both folds (p turns back
+to 1/6, then reaches 1) with every point on the curve."""
 
+import equinox as eqx
 import jax.numpy as jnp
 import numpy as np
 import pytest
 
 import socbjax as sj
-from socbjax._linear import DenseJacobianSolver
-from socbjax._path import path_run, path_start
 
 
-def make_F(x_ref):
-    return lambda x, p: x**3 - 3.0 * x - (6.0 * p - 3.0)
+class SCurve(eqx.Module):
+    """x³ − 3x − (6λ − 3) = 0 as a socbjax model (state: one number; control: λ = p)."""
+
+    def initial_state(self):
+        return jnp.asarray([-2.103803402735535])  # the only root at p = 0
+
+    def frames(self, state):
+        return None
+
+    def residual(self, state, control, frames):
+        return state**3 - 3.0 * state - (6.0 * control.load_factor - 3.0)
 
 
 def follow(method):
-    settings = sj.PathSettings(method=method, initial_step=0.05, max_step=0.1, min_step=1e-8, max_steps=400)
-    x0 = jnp.asarray([-2.103803402735535])  # the only root at p = 0
+    settings = sj.PathSettings(method=method, initial_step=0.05, max_step=0.1, min_step=1e-8, max_steps=400,
+                               max_attempts=5000, grow=1.5, fast_iterations=4, max_corrector_ratio=0.5, max_turn=0.6,
+                               corrector_floor=1e-12, atol=1e-12, max_iterations=25, max_backtracks=12)
     weights = jnp.asarray([1.0, 1.0])
-    solver = DenseJacobianSolver()
-    carry = path_start(make_F, x0, weights, solver, settings)
-    carry = path_run(make_F, carry, weights, jnp.asarray(1.0), solver, settings, jnp.asarray(400))
-    k = int(carry["steps"])
-    return carry, np.asarray(carry["X"][:k, 0]), np.asarray(carry["P"][:k]), np.asarray(carry["SIGN"][:k])
+    problem = sj.PathProblem(SCurve(), sj.Control.make(0.0), sj.Control.make(1.0), weights, weights)
+    recorder = sj.StepRecorder(400)
+    x0 = SCurve().initial_state()
+    state = sj.follow_path(problem, sj.start_path(x0, 0.0, settings, recorder), settings, sj.DenseLU(), recorder)
+    k = int(state.steps)
+    rec = state.recorder
+    return state, np.asarray(rec["X"][:k, 0]), np.asarray(rec["P"][:k]), np.asarray(rec["SIGN"][:k])
 
 
-def test_displacement_control_stops_at_the_fold():
-    carry, x, p, _ = follow("displacement")
-    assert int(carry["status"]) == sj.Status.CRITICAL_POINT
-    assert p.max() < 5 / 6 + 1e-9 and p.max() > 5 / 6 - 0.02  # got close, never jumped over
+def test_natural_parameter_stops_at_the_fold():
+    state, x, p, _ = follow("displacement")
+    assert state.result == sj.RESULTS.fold
+    assert 5 / 6 - 0.02 < p.max() < 5 / 6 + 1e-9  # got close, never jumped over
     assert np.all(x < -1.0)  # every recorded state is on the first branch
     np.testing.assert_allclose(x**3 - 3 * x, 6 * p - 3, atol=1e-9)
 
 
 def test_arclength_follows_both_folds():
-    carry, x, p, sign = follow("arclength")
-    assert int(carry["status"]) == sj.Status.CONVERGED and p[-1] == pytest.approx(1.0)
+    state, x, p, sign = follow("arclength")
+    assert state.result == sj.RESULTS.successful and p[-1] == pytest.approx(1.0)
     np.testing.assert_allclose(x**3 - 3 * x, 6 * p - 3, atol=1e-9)
     assert np.all(np.diff(x) > 0)  # monotone along the curve: no branch jumping
     dp = np.sign(np.diff(p))
     assert np.count_nonzero(dp[1:] != dp[:-1]) == 2  # two folds in p
     assert p.min() < 1 / 6 + 0.02 and p.max() > 5 / 6 - 0.02
     assert np.count_nonzero(sign[1:] != sign[:-1]) == 2  # det J changes sign at each fold
+
+
+# ------------------------------------------------------------------ the load ramp of solve
+def test_aggressive_first_step_is_cut_back_and_converges():
+    """PL²/EI = 10 in one step: Newton from the straight state may fail; cut-back rescues it."""
+    settings = sj.PathSettings(initial_step=1.0, max_step=1.0)
+    sol = sj.solve(sj.cantilever(3, dim=2), {-1: [0.0, 10.0]}, settings=settings)
+    ref = sj.solve(sj.cantilever(3, dim=2), {-1: [0.0, 10.0]})
+    assert sol.converged
+    np.testing.assert_allclose(sol.positions, ref.positions, atol=1e-10)
+
+
+def test_impossible_step_budget_fails_loudly():
+    settings = sj.PathSettings(initial_step=0.01, max_step=0.01, max_steps=5)
+    sol = sj.solve(sj.cantilever(3, dim=2), {-1: [0.0, 1.0]}, settings=settings, throw=False)
+    assert not sol.converged and sol.result == sj.RESULTS.max_steps
+    assert 0.0 < float(sol.load_factor) < 0.1  # the last accepted state, not an answer at full load
+    with pytest.raises(sj.ConvergenceError, match="step budget"):
+        sj.solve(sj.cantilever(3, dim=2), {-1: [0.0, 1.0]}, settings=settings)
+
+
+def test_imperfect_column_follows_the_stable_branch_from_any_step_size():
+    P = 1.05 * np.pi**2 / 4
+    tips = []
+    for step in (0.5, 0.1, 0.02):
+        settings = sj.PathSettings(initial_step=step, max_step=step)
+        sol = sj.solve(sj.column(3, dim=2), {-1: [-P, 1e-3 * P]}, settings=settings)
+        tips.append(np.asarray(sol.positions[-1]))
+    assert tips[0][1] > 0.2  # buckled toward the imperfection
+    np.testing.assert_allclose(tips[0], tips[1], atol=1e-10)
+    np.testing.assert_allclose(tips[0], tips[2], atol=1e-10)
+
+
+def test_settings_are_checked():
+    with pytest.raises(ValueError, match="min_step <= initial_step <= max_step"):
+        sj.solve(sj.cantilever(3, dim=2), {-1: [0.0, 1.0]}, settings=sj.PathSettings(initial_step=2.0, max_step=1.0))
+    with pytest.raises(ValueError, match="method"):
+        sj.PathSettings(method="newton")
+    with pytest.raises(ValueError, match="max_steps"):
+        sj.solve(sj.cantilever(3, dim=2), {-1: [0.0, 1.0]}, settings=sj.PathSettings(max_steps=0))

@@ -1,5 +1,5 @@
 """Physics validation of the planar SOCB and jointed models against independent references:
-the exact elastica (diffrax shooting, socbjax._reference), Mattiasson's (1981) table, and the
+the exact elastica (diffrax shooting, socbjax.testing), Mattiasson's (1981) table, and the
 classical Euler buckling loads."""
 
 import functools
@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 import socbjax as sj
-from socbjax._reference import elastica_cantilever
+from socbjax.testing import elastica_cantilever
 
 MATTIASSON_P2 = (0.16064, 0.49346)  # (ΔX/L, ΔY/L) at PL²/EI = 2
 
@@ -139,7 +139,7 @@ def test_post_buckling_follows_the_elastica(overload):
 def test_quadrature_order_is_configurable_and_converged_at_default():
     exact = exact_tip_displacement(0.0, 2.0)
     errors = {
-        order: relative_error(tip_displacement(sj.solve(sj.cantilever(3, dim=2), {-1: [0.0, 2.0]}, quadrature_order=order)), exact)
+        order: relative_error(tip_displacement(sj.solve(sj.cantilever(3, dim=2), {-1: [0.0, 2.0]}, settings=sj.PathSettings(quadrature_order=order))), exact)
         for order in (2, 8, 12)
     }
     assert errors[2] > 10 * errors[8]  # too few points: quadrature error dominates

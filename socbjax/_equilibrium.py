@@ -1,0 +1,117 @@
+"""A static equilibrium and what users read off it: :class:`Solution`.
+
+A :class:`Solution` is an ``eqx.Module`` pytree (``jax.jit`` can return it, ``jax.vmap``
+batches it, ``jax.grad`` differentiates through its arrays).  Besides the nodal fields it
+evaluates the smooth SOCB curve between nodes (:meth:`Solution.curve`) and the quantities
+of beam theory: end rotations, the maximum deflection, and the support reactions (forces
+and clamp couples).  Units: µm, pN, pN·µm, rad.
+"""
+
+from __future__ import annotations
+
+import equinox as eqx
+import jax.numpy as jnp
+import numpy as np
+from jaxtyping import Array, Float
+
+from ._curve import FilamentCurve, filament_curve
+from ._network import Network
+from ._solution import RESULTS, result_message
+
+__all__ = ["Solution"]
+
+
+class Solution(eqx.Module):
+    """A static equilibrium (or, with ``throw=False``, the last accepted state of a failed
+    solve: check ``result`` / ``converged``).
+
+    positions : [N, d] node positions (µm).
+    tangents : [N, d] unit tangents at nodes.
+    angles : 2D [N] angle θ (rad, winding kept); 3D [N, 2] in-plane θ = atan2(t_y, t_x) and
+        out-plane φ = asin(t_z) (rad) — for reporting only; the 3D solver uses no angles.
+    moments : 2D [N] bending moment (pN·µm); 3D [N, 3] moment vector.
+    curvatures : 2D [N] signed curvature dθ/ds (1/µm); 3D [N, 3] curvature vector t × t'.
+    segment_forces : [S, d] internal force per segment (pN).
+    reactions : [N, d] support reaction forces (pN), zero at free nodes.
+    result : a :class:`socbjax.RESULTS` item; ``converged`` is ``result == successful``.
+    load_factor : fraction of the requested loads reached (1.0 when converged).
+    iterations, steps, cutbacks, residual_norm : how the load ramp went.
+    state : the solver's state (SOCB or jointed); network : the loaded network (its
+        ``loads`` and ``couples`` include the applied ones); model : "socb" or "jointed".
+    """
+
+    positions: Float[Array, "N d"]
+    tangents: Float[Array, "N d"]
+    angles: Array
+    moments: Array
+    curvatures: Array
+    segment_forces: Float[Array, "S d"]
+    reactions: Float[Array, "N d"]
+    result: RESULTS
+    iterations: Array
+    steps: Array
+    cutbacks: Array
+    residual_norm: Array
+    load_factor: Array
+    state: object
+    network: Network
+    model: str = eqx.field(static=True)
+
+    @property
+    def converged(self) -> Array:
+        """Boolean array (traced under jit): the full load was reached."""
+        return self.result == RESULTS.successful
+
+    @property
+    def status_message(self) -> str:
+        return result_message(self.result)
+
+    def curve(self, points_per_segment: int = 16) -> FilamentCurve:
+        """The smooth filament curve: ``s``, ``positions``, ``tangents``, ``curvature`` and
+        ``moment`` at ``points_per_segment`` points of every segment (both ends included;
+        :class:`socbjax.FilamentCurve`).  For the jointed model: its rigid bars."""
+        bars = None
+        if self.model == "jointed":
+            d = self.state.directions
+            bars = jnp.stack([jnp.cos(d), jnp.sin(d)], -1) if self.network.dim == 2 else d / jnp.linalg.norm(d, axis=-1, keepdims=True)
+        return filament_curve(self.network, self.positions, self.tangents, self.moments, self.segment_forces,
+                              points_per_segment=points_per_segment, model=self.model, bar_directions=bars)
+
+    def end_rotation(self, node: int = -1) -> Array:
+        """Rotation of the tangent at ``node`` from its reference direction (rad): signed
+        (counter-clockwise positive, winding kept) in 2D, the unsigned angle in 3D."""
+        t0 = self.network.tangents[node]
+        if self.network.dim == 2:
+            return self.angles[node] - jnp.arctan2(t0[1], t0[0])
+        t = self.tangents[node]
+        return jnp.arctan2(jnp.linalg.norm(jnp.cross(t0, t)), jnp.dot(t0, t))
+
+    def max_deflection(self, points_per_segment: int = 16, axis=None) -> Array:
+        """Largest distance (µm) of the smooth curve from the reference axis: the line through
+        the first node's reference position along ``axis`` (default: from the first to the
+        last node's reference position), e.g. the lateral deflection of a column."""
+        origin = self.network.positions[0]
+        if axis is None:
+            axis = self.network.positions[-1] - origin
+        axis = jnp.asarray(axis, jnp.float64)
+        axis = axis / jnp.linalg.norm(axis)
+        offsets = self.curve(points_per_segment).positions - origin
+        lateral = offsets - jnp.sum(offsets * axis, axis=-1, keepdims=True) * axis
+        return jnp.max(jnp.linalg.norm(lateral, axis=-1))
+
+    @property
+    def reaction_moments(self) -> Array:
+        """Couples the clamps apply to the filament (2D [N], 3D [N, 3], pN·µm; zero at
+        unclamped nodes): −m at a clamp where a segment starts, +m where one ends."""
+        net = self.network
+        sign = np.where(net.leaving_segment < net.n_segments, -1.0, 1.0) * net.clamped
+        return (sign if net.dim == 2 else sign[:, None]) * self.moments
+
+    def __repr__(self) -> str:
+        try:
+            tip = np.asarray(self.positions[-1]).round(6).tolist()
+            return (f"Solution(model={self.model!r}, converged={bool(self.converged)}, "
+                    f"result={self.status_message!r}, load_factor={float(self.load_factor):.4g}, steps={int(self.steps)}, "
+                    f"iterations={int(self.iterations)}, residual={float(self.residual_norm):.2e}, last_node={tip})")
+        except Exception:  # noqa: BLE001  (traced: no values to show)
+            return f"Solution(model={self.model!r}, traced)"

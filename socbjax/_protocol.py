@@ -1,0 +1,235 @@
+"""The compression protocol as data over the path engine: phases, their problems, and the
+host driver of full (adaptive, variable-length) compressions with progress and checkpoints.
+
+Phases (each one path of :func:`socbjax._path.follow_path`; all share one compiled program,
+since they differ only in values):
+
+0. **settle** — the network's fixed loads (e.g. the lateral perturbation) are ramped on with
+   the probe free along its direction (zero probe force), so the start state is an
+   equilibrium that is not a taut straight strand (an inextensible straight strand spanning
+   probe and surface carries any axial force: its stiffness matrix is singular);
+1. **loading** — the probe displacement u goes from the settled u₀ to the requested travel;
+2. **unloading** — u goes back to u₀ + 10⁻⁴ (travel − u₀): there the strands are straight
+   again and the stiffness turns singular (the force falls from ~Euler to 0 over a
+   vanishing displacement), which no step size resolves reliably.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import hashlib
+import sys
+import time
+from pathlib import Path
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+import numpy as np
+from jax.flatten_util import ravel_pytree
+
+from ._path import PathProblem, PathSettings, StepRecorder, follow_path, path_weights, start_path
+from ._residual import Control
+from ._solution import RESULTS, result_name
+
+__all__ = ["UNLOAD_MARGIN", "Checkpoint", "phase_problem", "settled_displacement", "run_phases", "Progress"]
+
+UNLOAD_MARGIN = 1e-4  # unloading ends at u0 + margin × (travel − u0)
+
+
+@dataclasses.dataclass(frozen=True)
+class Checkpoint:
+    """Where and how often a long :func:`socbjax.compress` writes its state.
+
+    path : HDF5 file written atomically every ``every`` accepted steps; ``resume=True``
+    continues from it and ends with the same curve as an uninterrupted run."""
+
+    path: str | Path
+    every: int = 50
+    resume: bool = False
+
+    def __post_init__(self):
+        if isinstance(self.every, bool) or not isinstance(self.every, (int, np.integer)) or self.every < 1:
+            raise ValueError(f"Checkpoint.every must be a positive number of steps, got {self.every!r}")
+        if not isinstance(self.path, (str, Path)) or not str(self.path):
+            raise TypeError(f"Checkpoint.path must be a file path, got {self.path!r}")
+        if not isinstance(self.resume, bool):
+            raise TypeError(f"Checkpoint.resume must be True or False, got {self.resume!r}")
+
+
+def phase_problem(model, index, u0, u_max, settings: PathSettings) -> PathProblem:
+    """The path problem of phase ``index`` (0 settle, 1 loading, 2 unloading; may be traced)."""
+    index = jnp.asarray(index)
+    u_end = u0 + UNLOAD_MARGIN * (u_max - u0)
+    settle = index == 0
+    lam0 = jnp.where(settle, 0.0, 1.0)
+    u_from = jnp.where(settle, 0.0, jnp.where(index == 1, u0, u_max))
+    u_to = jnp.where(settle, 0.0, jnp.where(index == 1, u_max, u_end))
+    held = jnp.where(settle, 0.0, 1.0)
+    scale = jnp.where(settle, 4.0 * settings.max_step, jnp.abs(u_to - u_from))
+    weights = path_weights(model, scale)
+    return PathProblem(model, Control.make(lam0, u_from, held), Control.make(1.0, u_to, held), weights, weights)
+
+
+def settled_displacement(model, x) -> jax.Array:
+    """u₀ (µm): the mean displacement of the probe nodes along the probe direction in state x."""
+    net = model.network
+    positions = ravel_pytree(model.initial_state())[1](x).positions
+    moved = (positions - net.positions)[np.flatnonzero(net.probe)] @ jnp.asarray(net.probe_direction)
+    return jnp.mean(moved)
+
+
+@eqx.filter_jit
+def _chunk(problem, state, settings, inner, recorder, chunk):
+    return follow_path(problem, state, settings, inner, recorder, stop_after=chunk)
+
+
+class Progress:
+    """Progress of a long run: a bar on stderr (``progress=True``: compilation, then steps,
+    displacement and elapsed time), or a user callable ``progress(phase, u, steps, done)``
+    called between chunks of the path (phase name, probe displacement µm, accepted steps)."""
+
+    def __init__(self, progress, total: float):
+        self.callback = progress if callable(progress) else None
+        self.enabled = bool(progress) and self.callback is None
+        self.total, self.t0 = total, time.perf_counter()
+
+    @property
+    def active(self) -> bool:
+        return self.enabled or self.callback is not None
+
+    def say(self, text: str) -> None:
+        if self.enabled:
+            sys.stderr.write(text + "\n")
+            sys.stderr.flush()
+
+    def __call__(self, phase: str, u: float, steps: int, done: bool = False):
+        if self.callback is not None:
+            self.callback(phase, u, steps, done)
+            return
+        if not self.enabled:
+            return
+        frac = min(max(u / self.total, 0.0), 1.0) if self.total else 1.0
+        bar = "#" * int(30 * frac)
+        elapsed = time.perf_counter() - self.t0
+        sys.stderr.write(f"\r{phase:>9s} [{bar:<30s}] u = {u:8.4f} µm  steps {steps:5d}  {elapsed:6.1f} s" + ("\n" if done else ""))
+        sys.stderr.flush()
+
+
+def _fingerprint(model, u_max, unload, settings) -> str:
+    h = hashlib.sha256(model.network.topology.key.encode())
+    for leaf in jax.tree_util.tree_leaves(model.network):
+        h.update(np.ascontiguousarray(np.asarray(leaf)).tobytes())
+    h.update(repr((float(u_max), bool(unload), settings, model.quad)).encode())
+    return h.hexdigest()
+
+
+def _named_leaves(tree) -> dict:
+    return {jax.tree_util.keystr(k): np.asarray(v) for k, v in jax.tree_util.tree_flatten_with_path(tree)[0]}
+
+
+def _from_named(template, arrays: dict):
+    paths, treedef = jax.tree_util.tree_flatten_with_path(template)
+    missing = [jax.tree_util.keystr(k) for k, _ in paths if jax.tree_util.keystr(k) not in arrays]
+    if missing:
+        raise ValueError(f"the checkpoint lacks the path-state fields {missing[:4]} (damaged or from another version)")
+    return jax.tree_util.tree_unflatten(treedef, [jnp.asarray(arrays[jax.tree_util.keystr(k)]) for k, _ in paths])
+
+
+class _Run:
+    """The phases of one host-driven compression, with their records and checkpoints."""
+
+    def __init__(self, model, u_max, unload, settings, inner, progress, checkpoint):
+        self.model, self.u_max, self.settings, self.inner = model, float(u_max), settings, inner
+        self.x0 = ravel_pytree(model.initial_state())[0]
+        self.recorder = StepRecorder(settings.max_steps)
+        self.names = ["settle", "loading"] + (["unloading"] if unload else [])
+        self.progress, self.checkpoint = progress, checkpoint
+        self.chunk = checkpoint.every if checkpoint else (25 if progress.active else settings.max_steps)
+        self.fingerprint = _fingerprint(model, u_max, unload, settings)
+        self.start, self.saved, self.extra, self.parts = 0, None, {}, []
+
+    def resume(self):
+        from ._io import load_checkpoint
+
+        arrays, meta = load_checkpoint(self.checkpoint.path)
+        if meta.get("fingerprint") != self.fingerprint:
+            raise ValueError(f"checkpoint {self.checkpoint.path} belongs to a different run (network, loads or settings differ)")
+        self.start = int(meta["phase_index"])
+        self.saved = {k[6:]: v for k, v in arrays.items() if k.startswith("carry/")}
+        self.extra = {k[6:]: float(v) for k, v in arrays.items() if k.startswith("extra/")}
+        records = {k[8:]: v for k, v in arrays.items() if k.startswith("records/")}
+        self.parts = [records] if "X" in records else []
+
+    def _save(self, index, state):
+        if not self.checkpoint:
+            return
+        from ._io import save_checkpoint
+
+        arrays = {f"carry/{k}": v for k, v in _named_leaves(state).items()}
+        arrays.update({f"extra/{k}": np.asarray(v) for k, v in self.extra.items()})
+        if self.parts:
+            arrays.update({f"records/{k}": v for k, v in concat(self.parts).items()})
+        save_checkpoint(self.checkpoint.path, arrays, {"fingerprint": self.fingerprint, "phase_index": index})
+
+    def _finish(self, index, state):
+        k = int(state.steps)
+        rec = {name: np.asarray(v)[:k] for name, v in state.recorder.items()}  # slice on the host: no retrace per k
+        if index == 0:  # only the settled end state is part of the curve
+            x = np.asarray(state.x)
+            self.extra["u0"] = float(settled_displacement(self.model, jnp.asarray(x)))
+            self.parts = [dict(X=x[None], U=np.array([self.extra["u0"]]), SIGN=np.zeros(1), ITER=np.array([k], np.int32),
+                               PHASE=np.zeros(1, np.int8))]
+            return
+        if index == 1:
+            self.extra["sign_ref"] = float(state.sign0)
+            self.parts[0]["SIGN"] = np.array([self.extra["sign_ref"]])
+        u_from, u_to = (self.extra["u0"], self.u_max) if index == 1 else (self.u_max, self.extra["u0"] + UNLOAD_MARGIN * (self.u_max - self.extra["u0"]))
+        self.parts.append(dict(X=rec["X"], U=u_from + rec["P"] * (u_to - u_from), SIGN=rec["SIGN"], ITER=rec["ITER"],
+                               PHASE=np.full(k, index, np.int8)))
+
+    def _phase(self, index):
+        u0 = self.extra.get("u0", 0.0)
+        problem = phase_problem(self.model, index, u0, self.u_max, self.settings)
+        x = self.x0 if index == 0 else jnp.asarray(self.parts[-1]["X"][-1])
+        template = start_path(x, 0.0, self.settings, self.recorder)
+        resumed = self.saved is not None and index == self.start
+        state = _from_named(template, self.saved) if resumed else template
+        ends = (0.0, 0.0) if index == 0 else ((u0, self.u_max) if index == 1 else (self.u_max, u0 + UNLOAD_MARGIN * (self.u_max - u0)))
+        settings = self.settings.traced()
+        first = True
+        while True:
+            if first and not resumed:
+                self.progress.say(f"{self.names[index]:>9s}: compiling and running the first {self.chunk} steps ...")
+            state = _chunk(problem, state, settings, self.inner, self.recorder, jnp.asarray(self.chunk))
+            done = bool(state.done) or int(state.steps) >= self.settings.max_steps
+            self.progress(self.names[index], ends[0] + float(state.p) * (ends[1] - ends[0]), int(state.steps), done)
+            first = False
+            if done:
+                return state
+            self._save(index, state)
+
+    def run(self):
+        result = RESULTS.successful
+        for index in range(self.start, len(self.names)):
+            state = self._phase(index)
+            self._finish(index, state)
+            result = state.result
+            if result_name(result) != "successful":
+                break
+        return result
+
+
+def concat(parts: list[dict]) -> dict:
+    """The records of several phases, concatenated."""
+    return {k: np.concatenate([p[k] for p in parts]) for k in parts[0]}
+
+
+def run_phases(model, u_max, unload, settings, inner, *, progress=None, checkpoint=None):
+    """Run the settle/loading/unloading phases on the host (concrete values); returns
+    (records of every recorded step, extra {u0, sign_ref}, result)."""
+    run = _Run(model, u_max, unload, settings, inner, progress or Progress(False, u_max), checkpoint)
+    if checkpoint and checkpoint.resume and Path(checkpoint.path).exists():
+        run.resume()
+    result = run.run()
+    return concat(run.parts), run.extra, result

@@ -1,0 +1,28 @@
+"""Independent reference solvers, used by the tests, the demo and the benchmarks as oracles
+for SOCB (they share no code with it): the planar elastica by shooting (diffrax), the
+kinked cantilever and the post-buckled column.
+
+Units: µm, pN, pN·µm, pN·µm².  Float64 is required (``import socbjax`` enables it).
+"""
+
+from ._column import ElasticaColumn, elastica_column_force, elastica_column_shape
+from ._elastica import (
+    ElasticaProfile,
+    ElasticaSolution,
+    elastica_cantilever,
+    elastica_kinked_cantilever,
+    elastica_tip_deflection,
+    shoot_elastica,
+)
+
+__all__ = [
+    "ElasticaColumn",
+    "ElasticaProfile",
+    "ElasticaSolution",
+    "elastica_cantilever",
+    "elastica_column_force",
+    "elastica_column_shape",
+    "elastica_kinked_cantilever",
+    "elastica_tip_deflection",
+    "shoot_elastica",
+]
