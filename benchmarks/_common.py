@@ -2,7 +2,7 @@
 machine description, a plain-text table printer, convergence-order fits, and the exact
 planar-elastica cantilever used as ground truth.
 
-The ground truth comes from ``socbjax._reference`` (diffrax shooting) when it imports and
+The ground truth comes from ``socbjax.testing`` (diffrax shooting) when it imports and
 works; otherwise from :func:`shoot_cantilever_numpy`, an independent numpy shooting solver
 (fixed-step RK4 from the free tip back to the clamp, Newton on the tip angle).  Both are
 computed when possible and their difference is recorded as a cross-check.
@@ -216,15 +216,15 @@ def exact_cantilever(loads) -> dict:
            "crosscheck_max_abs_diff": None, "reference_error": None}
     try:
         import socbjax  # noqa: F401  (enables float64)
-        from socbjax._reference import elastica_tip_deflection
+        from socbjax.testing import elastica_tip_deflection
 
         ref = np.array([elastica_tip_deflection(float(p)) for p in loads])
         diff = float(np.max(np.abs(ref - np.stack([dX_np, dY_np], axis=1))))
-        out.update(source="socbjax._reference.elastica_tip_deflection", dX=ref[:, 0], dY=ref[:, 1],
+        out.update(source="socbjax.testing.elastica_tip_deflection", dX=ref[:, 0], dY=ref[:, 1],
                    crosscheck_max_abs_diff=diff)
         if diff > 1e-9:
-            print(f"WARNING: socbjax._reference and numpy shooting differ by {diff:.2e}")
+            print(f"WARNING: socbjax.testing and numpy shooting differ by {diff:.2e}")
     except Exception as exc:  # reference not ready: keep the numpy solution
         out["reference_error"] = f"{type(exc).__name__}: {exc}"
-        print(f"note: socbjax._reference unavailable ({out['reference_error'][:120]}); using numpy shooting")
+        print(f"note: socbjax.testing unavailable ({out['reference_error'][:120]}); using numpy shooting")
     return out

@@ -12,13 +12,17 @@ under 64 random imperfection patterns (lateral 1e-4 pN per strand, directions fr
     ``XLA_FLAGS=--xla_force_host_platform_device_count=2``), compared number for number
     with (b).
 
-Why batching gains little or much is measured, not guessed: every SuperLU factorisation is
-a host callback, wrapped here to count calls and host seconds.  Sequential runs factor only
+Why batching gains little or much is measured, not guessed: every SuperLU factorisation
+runs on the host inside a ``jax.pure_callback`` (one callback call factors every batched
+member); the factorisation itself (``socbjax._linear._factor_solve``, private) is wrapped
+here to count factorisations and their host seconds, and so are the compiled path loops
+(``socbjax._protocol._chunk`` of ``compress``, ``socbjax._ensemble._phase`` of
+``compress_ensemble``, private), to time what runs inside them.  Sequential runs factor only
 what each path needs; the vmapped loop factors every member's Jacobian on every batched
-Newton iteration until its slowest member is done, so (batched calls − sequential calls) /
-batched calls is the fraction of member-iterations spent idle.  The rest of the time (JVPs,
-the while-loop machinery) is what vmap amortises: its cost per batched iteration is
-compared with B × the cost per single iteration.
+Newton iteration until its slowest member is done, so (batched factorisations − sequential
+factorisations) / batched factorisations is the fraction of member-iterations spent idle.
+The rest of the time (JVPs, the while-loop machinery) is what vmap amortises: its cost per
+batched iteration is compared with B × the cost per single iteration.
 
 Run:  PYTHONPATH=. python benchmarks/ensemble_throughput.py [--quick] [--out DIR]
 (--quick: a 2-D 3-generation outcrop, 8 members under 8 EI values, no dense run: a smoke
@@ -38,22 +42,22 @@ import _common  # (sets OPENBLAS_NUM_THREADS before numpy loads)
 import numpy as np
 
 import socbjax as sj
-from socbjax import _compress, _ensemble, _linear
+from socbjax import _ensemble, _linear, _protocol
 
 LU = {"calls": 0, "seconds": 0.0, "compiled_s": 0.0}
-_splu = _linear._splu_host
+_factor_solve = _linear._factor_solve
 
 
-def _counted_splu(*args, **kwargs):  # the sparse LU's host side, counted (patched before any trace)
+def _counted_factor_solve(*args, **kwargs):  # one SuperLU factorisation (+ solve) on the host, counted
     t0 = time.perf_counter()
     try:
-        return _splu(*args, **kwargs)
+        return _factor_solve(*args, **kwargs)
     finally:
         LU["calls"] += 1
         LU["seconds"] += time.perf_counter() - t0
 
 
-_linear._splu_host = _counted_splu
+_linear._factor_solve = _counted_factor_solve  # looked up by the host callback at call time
 
 
 def _in_compiled(fn):  # time spent in the compiled phases (the rest is host-side set-up and results)
@@ -68,21 +72,23 @@ def _in_compiled(fn):  # time spent in the compiled phases (the rest is host-sid
     return timed
 
 
-_compress._start, _compress._run, _ensemble._phase = map(_in_compiled, (_compress._start, _compress._run, _ensemble._phase))
+_protocol._chunk, _ensemble._phase = map(_in_compiled, (_protocol._chunk, _ensemble._phase))
 
 
 def members(quick: bool):
-    import equinox as eqx
-
     if quick:
         net = sj.dendritic_outcrop(generations=3, gap=3.0, seed=0, dim=2, perturbation=0.0)
-        return [eqx.tree_at(lambda n: n.EI, net, net.EI * s) for s in np.linspace(0.5, 2.0, 8)]
+        return [net.replace(EI=net.EI * s) for s in np.linspace(0.5, 2.0, 8)]
     net = sj.dendritic_outcrop(generations=3, gap=3.0, seed=0, dim=3, perturbation=0.0)
-    return [eqx.tree_at(lambda n: n.loads, net, sj.strand_perturbation(net, 1e-4, seed=k)) for k in range(64)]
+    return [net.replace(loads=sj.strand_perturbation(net, 1e-4, seed=k)) for k in range(64)]
 
 
-OPTIONS = dict(unload=True, settings=sj.PathSettings(max_steps=200))
+SETTINGS = sj.PathSettings(max_steps=200)
 DISPLACEMENT = 0.5
+
+
+def options(linear_solver: str) -> dict:
+    return dict(unload=True, settings=SETTINGS.replace(linear_solver=linear_solver))
 
 
 def _timed(fn):
@@ -94,8 +100,8 @@ def _timed(fn):
 
 
 def sequential(nets) -> dict:
-    run = lambda: [sj.compress(n, DISPLACEMENT, linear_solver="sparse", **OPTIONS) for n in nets]
-    _, first_one, _ = _timed(lambda: sj.compress(nets[0], DISPLACEMENT, linear_solver="sparse", **OPTIONS))
+    run = lambda: [sj.compress(n, DISPLACEMENT, **options("sparse")) for n in nets]
+    _, first_one, _ = _timed(lambda: sj.compress(nets[0], DISPLACEMENT, **options("sparse")))
     _, first_pass, _ = _timed(run)
     results, wall, lu = _timed(run)
     return dict(first_call_s=first_one, first_pass_s=first_pass, wall_s=wall, lu=lu, results=results,
@@ -103,7 +109,7 @@ def sequential(nets) -> dict:
 
 
 def ensemble(nets, linear_solver: str, devices=None) -> dict:
-    run = lambda: sj.compress_ensemble(nets, DISPLACEMENT, linear_solver=linear_solver, devices=devices, **OPTIONS)
+    run = lambda: sj.compress_ensemble(nets, DISPLACEMENT, devices=devices, **options(linear_solver))
     _, first, _ = _timed(run)
     result, wall, lu = _timed(run)
     return dict(first_call_s=first, wall_s=wall, lu=lu, result=result, devices=list(result.devices))
@@ -116,7 +122,7 @@ def sharded_worker(path: Path) -> int:
     nets = members("--quick" in sys.argv)
     row = ensemble(nets, "sparse", devices=jax.devices())
     ens = row.pop("result")
-    np.savez(path, force=ens.force, displacement=ens.displacement, n_steps=ens.n_steps, status=ens.status)
+    np.savez(path, force=ens.force, displacement=ens.displacement, n_steps=ens.n_steps, completed=ens.completed)
     print("RESULT " + json.dumps(dict(row, n_devices=len(jax.devices()))))
     return 0
 
@@ -146,7 +152,7 @@ def analyse(B, seq, ens) -> dict:
     attempts = ens["result"].attempts  # [B, phases]
     outer_idle = 1.0 - attempts.sum() / (B * attempts.max(axis=0).sum())
     loop_seq, loop_ens = seq["lu"]["compiled_s"], ens["lu"]["compiled_s"]  # seconds inside the compiled phases
-    per_single = loop_seq / seq["lu"]["calls"]  # one member, one linear solve (Newton iteration or tangent)
+    per_single = loop_seq / seq["lu"]["calls"]  # one member, one factorisation (a Newton iteration; its tangent reuses it)
     batched_iters = ens["lu"]["calls"] / B  # every batched solve factors all B members
     per_batched = loop_ens / batched_iters
     non_lu_single = (loop_seq - seq["lu"]["seconds"]) / seq["lu"]["calls"]
@@ -245,7 +251,7 @@ def main(argv=None) -> int:
     _common.print_table(["quantity", "value"], [[k, v] for k, v in why.items()], title="Where the time goes (sparse LU counted)", spec=".4g")
     figure(ens["result"], rows, args.out)
     payload = dict(displacement_um=DISPLACEMENT, members=B, network=dict(dim=nets[0].dim, nodes=nets[0].n_nodes,
-                   segments=nets[0].n_segments), max_steps=OPTIONS["settings"].max_steps, rows=rows,
+                   segments=nets[0].n_segments), max_steps=SETTINGS.max_steps, rows=rows,
                    throughput_ratio_vmapped_over_sequential=ratio, same_steps=same_steps,
                    max_rel_force_diff_vmapped_vs_sequential=diff_seq, max_rel_force_diff_sharded_vs_unsharded=diff_shard,
                    sharded_devices=shard["devices"], sharded_difference_location=where, analysis=why, load_average=os.getloadavg(),

@@ -10,7 +10,7 @@ deflection against the exact elastica:
 * the convergence order p (error ~ h^p, h = L/(n-1)), fitted over the points with error
   above 1e-12, plus the local slope between consecutive n.
 
-Ground truth: ``socbjax._reference`` (cross-checked with the numpy shooting solver of
+Ground truth: ``socbjax.testing`` (cross-checked with the numpy shooting solver of
 ``_common.py``); Mattiasson (1981) tabulates ΔY/L = 0.49346, ΔX/L = 0.16064.
 
 Run:  PYTHONPATH=. python benchmarks/fig4a_cantilever_error.py [--quick] [--out DIR]

@@ -71,7 +71,7 @@ def main(argv=None) -> int:
                 rec = {"supports": list(supports), "model": model, "n": n, "exact": p_exact}
                 with C.Timer() as t:
                     try:
-                        p = sj.buckling_load(sj.column(n, supports=supports, dim=2), model=model)
+                        p = float(sj.buckling_load(sj.column(n, supports=supports, dim=2), model=model))
                         rec.update(P_cr=p, rel_error=(p - p_exact) / p_exact)
                     except Exception as exc:
                         rec["error"] = f"{type(exc).__name__}: {exc}"

@@ -1,4 +1,5 @@
-"""Timing of the Jacobian linear-algebra back ends of ``socbjax._linear``.
+"""Timing of the Jacobian linear solvers of socbjax (``socbjax.ColouredSparseLU`` and
+``socbjax.DenseLU``, lineax solvers).
 
 Test function: a random tree of m blocks of b = 10 unknowns (each block's parent is the
 previous block with probability 0.8, else a uniformly random earlier block), with residual
@@ -8,14 +9,17 @@ previous block with probability 0.8, else a uniformly random earlier block), wit
 so J is a tree of dense 10 x 10 blocks with ~30 nonzeros per row on average (more at
 branch points).  For n = m b = 1000, 4000, 10000 (quick: 1000, 4000) it reports
 
-* prepare: the one-off host set-up of ``SparseJacobianSolver`` (dense probing of the
+* prepare: the one-off host set-up ``ColouredSparseLU.probe(F, x)`` (dense probing of the
   pattern at two points, O(n) evaluations of F, plus the greedy column colouring);
-* assembly: the jitted colour-compressed Jacobian (one vmapped JVP over the colour seeds
-  and the gather of the nonzeros);
-* factor+solve: the host SciPy part alone (SuperLU with ``permc_spec`` MMD_AT_PLUS_A and
-  COLAMD, one right-hand side) on the assembled values;
-* sparse total: the jitted ``SparseJacobianSolver.solve`` (assembly + callback);
-* dense: the jitted ``DenseJacobianSolver.solve`` (``jax.jacfwd`` + LU, n <= 4000 only).
+* assembly: the jitted colour-compressed Jacobian ``ColouredSparseLU.values(F, x)`` (one
+  vmapped JVP over the colour seeds and the gather of the nonzeros);
+* factor+solve: the host SciPy part alone (``scipy.sparse.linalg.splu`` with ``permc_spec``
+  MMD_AT_PLUS_A and COLAMD, and its solve with one right-hand side) on the assembled values;
+* sparse total: jitted ``factor`` (assembly from the JVP of F) + ``compute`` (the SuperLU
+  callback) of ``ColouredSparseLU``, with its default ordering ``permc_spec`` (COLAMD; the
+  removed ``SparseJacobianSolver`` defaulted to MMD_AT_PLUS_A);
+* dense: the same with ``DenseLU`` (J from n unit-vector JVPs, i.e. ``jax.jacfwd``, + LU,
+  n <= 4000 only).
 
 Every time is the median of ``--repeats`` (>= 5) calls after a first, compiling call.
 The machine used for the recorded results has 2 CPU cores; OPENBLAS_NUM_THREADS=1 is set
@@ -79,36 +83,51 @@ def median_time(f, repeats: int) -> float:
     return 1e3 * float(np.median(times))
 
 
+def jacobian_solve(solver, fn):
+    """(x, rhs [n, k]) -> (J(x)^-1 rhs [n, k], sign det J): one ``factor`` of J = dfn/dx from
+    its JVP and ``compute`` for every right-hand side (vmapped: one factorisation)."""
+    import jax
+
+    def solve(x, rhs):
+        state = solver.factor(lambda v: jax.jvp(fn, (x,), (v,))[1], x.shape[0], x.dtype, {})
+        X, _, stats = jax.vmap(lambda b: solver.compute(state, b, {}))(rhs.T)
+        return X.T, stats["sign"][0]
+
+    return solve
+
+
 def time_case(n: int, repeats: int, dense: bool) -> dict:
     import jax
     import jax.numpy as jnp
+    import scipy.sparse as sp
+    import scipy.sparse.linalg as spla
 
-    from socbjax import _linear as L
+    import socbjax as sj
 
     fn = tree_function(n // BLOCK)
     x = jnp.asarray(np.random.default_rng(1).standard_normal(n))
     rhs = jnp.asarray(np.random.default_rng(2).standard_normal((n, 1)))
 
     t0 = time.perf_counter()
-    sparse = L.SparseJacobianSolver().prepare(fn, x)
+    sparse = sj.ColouredSparseLU.probe(fn, x)
     prepare_s = time.perf_counter() - t0
 
-    assemble = jax.jit(lambda x: sparse.jacobian_values(fn, x))
-    solve = jax.jit(lambda x, r: sparse.solve(fn, x, r))
+    assemble = jax.jit(lambda x: sparse.values(fn, x))
+    solve = jax.jit(jacobian_solve(sparse, fn))
     vals = np.asarray(assemble(x))
-    host = {}
-    for spec in ("MMD_AT_PLUS_A", "COLAMD"):
-        kw = {"indices": sparse.rows.a, "indptr": sparse.indptr.a, "n": n, "transpose": False, "permc_spec": spec}
-        host[spec] = median_time(lambda kw=kw: L._splu_host(vals, np.asarray(rhs), **kw), repeats)
+    A = sp.csc_matrix((vals, sparse.rows.a, sparse.indptr.a), shape=(n, n))
+    b = np.asarray(rhs)
+    host = {spec: median_time(lambda spec=spec: spla.splu(A, permc_spec=spec).solve(b), repeats)
+            for spec in ("MMD_AT_PLUS_A", "COLAMD")}
     row_nnz = np.bincount(sparse.rows.a, minlength=n)
     rec = {"n": n, "nnz": sparse.nnz, "mean_row_nnz": float(row_nnz.mean()), "max_row_nnz": int(row_nnz.max()),
-           "n_colors": sparse.n_colors, "prepare_s": prepare_s,
+           "n_colors": sparse.n_colors, "permc_spec": sparse.permc_spec, "prepare_s": prepare_s,
            "assembly_ms": median_time(lambda: assemble(x), repeats),
            "factor_solve_ms": host["MMD_AT_PLUS_A"], "factor_solve_colamd_ms": host["COLAMD"],
            "sparse_total_ms": median_time(lambda: solve(x, rhs), repeats), "dense_ms": None, "max_rel_diff": None}
     X, sign = solve(x, rhs)
     if dense:
-        dsolve = jax.jit(lambda x, r: L.DenseJacobianSolver().solve(fn, x, r))
+        dsolve = jax.jit(jacobian_solve(sj.DenseLU(), fn))
         rec["dense_ms"] = median_time(lambda: dsolve(x, rhs), repeats)
         Xd, sign_d = dsolve(x, rhs)
         rec["max_rel_diff"] = float(jnp.max(jnp.abs(X - Xd)) / jnp.max(jnp.abs(Xd)))

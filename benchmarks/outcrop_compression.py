@@ -6,11 +6,10 @@ settle, compress by 3 µm, withdraw — runs twice in one process: the first run
 compilation, the second is timed (everything compiled).  Reported: unknowns, segments,
 steps, Newton iterations, wall time after compilation and the time per Newton iteration
 (each iteration = one coloured sparse Jacobian + one SuperLU factorisation and solve;
-per-step tangent solves are included in the total).  Also: one Jacobian assembly and one
-factor+solve in isolation at the largest size.
+per-step tangent solves are included in the total).
 
 **Sparse against dense Jacobian** (same protocol, same steps; both timed after compilation
-in the same process): the dense path (``linear_solver="dense"``: ``jax.jacfwd``, n jvps,
+in the same process): the dense path (``PathSettings(linear_solver="dense")``: n jvps,
 + dense LU) costs O(n²)–O(n³) per Newton iteration, ~10 s at the 8-generation outcrop's
 6,858 unknowns, so its full ~500-iteration run would take over an hour here.  The full
 load–unload run is compared at 6 generations (1,800 unknowns), and at 8 generations both
@@ -28,7 +27,6 @@ from __future__ import annotations
 import time
 
 import _common  # noqa: F401  (sets OPENBLAS_NUM_THREADS before numpy loads)
-import equinox as eqx
 import numpy as np
 
 import socbjax as sj
@@ -71,15 +69,16 @@ def versus_dense(generations: int, displacement: float, max_step: float, max_att
     compiling warm-up (one attempt per phase); ``max_attempts`` caps every phase."""
     net = sj.dendritic_outcrop(generations=generations, gap=gap, seed=0)
     base = sj.PathSettings(max_step=max_step, initial_step=min(0.02, max_step))
-    capped = eqx.tree_at(lambda s: s.max_attempts, base, max_attempts or base.max_attempts)
+    capped = base.replace(max_attempts=max_attempts)  # None: compress's default budget
     out = {"generations": generations, "segments": net.n_segments, "max_attempts_per_phase": max_attempts}
     for kind in ("sparse", "dense"):
-        warm = eqx.tree_at(lambda s: s.max_attempts, base, 1)
+        warm = base.replace(max_attempts=1, linear_solver=kind)
         t0 = time.perf_counter()
-        sj.compress(net, displacement, unload=True, method="arclength", settings=warm, linear_solver=kind, throw=False)
+        sj.compress(net, displacement, unload=True, method="arclength", settings=warm, throw=False)
         compile_s = time.perf_counter() - t0
         t0 = time.perf_counter()
-        result = sj.compress(net, displacement, unload=True, method="arclength", settings=capped, linear_solver=kind, throw=False)
+        result = sj.compress(net, displacement, unload=True, method="arclength", settings=capped.replace(linear_solver=kind),
+                             throw=False)
         wall = time.perf_counter() - t0
         iterations = int(result.iterations.sum())
         out[kind] = {"wall_s": wall, "warmup_s": compile_s, "steps": result.n_steps, "newton_iterations": iterations,

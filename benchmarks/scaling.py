@@ -11,10 +11,13 @@ Two families, each size measured in its own Python process (so memory is that si
   6 … 12 generations = 126 … 8,190 segments (13 generations, 16,382 segments, in full mode
   too); one Newton iteration is timed at the straight state plus 1e-3 noise.
 
-One Newton iteration = residual + colour-compressed sparse Jacobian (one vmapped jvp over the
-column colours) + SuperLU factorisation (COLAMD ordering) and solve, i.e. exactly what
-``NewtonSolver(jacobian_solver=...)`` does per iteration.  Reported per size: unknowns,
-Jacobian non-zeros, colours, one-off host preparation, compile, medians (of 7) of the whole
+One Newton iteration = residual and its linearisation (``jax.linearize``) + colour-compressed
+sparse Jacobian (``ColouredSparseLU.factor``: one vmapped jvp over the column colours) +
+SuperLU factorisation (COLAMD ordering) and solve (``ColouredSparseLU.compute``), i.e. what
+``socbjax.DampedNewton`` does per iteration with the solver of
+``socbjax.linear_solver_for(model, "sparse")`` (prepared from the network graph).  Reported
+per size: unknowns, Jacobian non-zeros, colours, one-off host preparation (that
+``linear_solver_for`` call, including its compilations), compile, medians (of 7) of the whole
 iteration and of its two parts, memory (XLA buffers of the compiled iteration + the L and U
 factors, and the process's peak RSS), and the log-log slopes of time and memory against
 segments between 1,000 and 10,000 segments.  Acceptance (issue 5): slope ≤ 1.2 and the
@@ -71,14 +74,15 @@ def _solve_chain(net, out: dict) -> None:
     import socbjax as sj
 
     P = LOAD * EI / LENGTH**2
+    settings = sj.PathSettings(linear_solver="sparse")
     t0 = time.perf_counter()
-    sol = sj.solve(net, {-1: [0.0, -P]}, linear_solver="sparse")
+    sol = sj.solve(net, {-1: [0.0, -P]}, settings=settings)
     jax.block_until_ready(sol.positions)
     out["solve_first_s"] = time.perf_counter() - t0
     times = []
     for _ in range(3):
         t0 = time.perf_counter()
-        sol = sj.solve(net, {-1: [0.0, -P]}, linear_solver="sparse")
+        sol = sj.solve(net, {-1: [0.0, -P]}, settings=settings)
         jax.block_until_ready(sol.positions)
         times.append(time.perf_counter() - t0)
     exact = C.exact_cantilever([LOAD])
@@ -95,16 +99,15 @@ def measure(family: str, size: int) -> dict:
     import scipy.sparse as sp
     import scipy.sparse.linalg as spla
 
-    import socbjax  # noqa: F401  (float64)
-    from socbjax._solve import make_model, prepare_jacobian_solver
+    import socbjax as sj
 
     net = _network(family, size)
-    disc = make_model(net)
+    disc = sj.make_model(net)
     state0 = disc.initial_state()
     x_init, unravel = jax.flatten_util.ravel_pytree(state0)
     out = dict(family=family, size=size, segments=int(net.n_segments), unknowns=int(x_init.size))
     t0 = time.perf_counter()
-    js = prepare_jacobian_solver(disc, "sparse")
+    js = sj.linear_solver_for(disc, "sparse")
     out.update(prepare_s=time.perf_counter() - t0, nnz=js.nnz, colors=js.n_colors)
     if family == "chain":
         _solve_chain(net, out)
@@ -113,13 +116,21 @@ def measure(family: str, size: int) -> dict:
     else:
         x = x_init + 1e-3 * jnp.asarray(np.random.default_rng(0).standard_normal(x_init.size))
         loads = jnp.zeros_like(net.positions)
+    disc = sj.make_model(net.replace(loads=loads))  # loads live in the network; same topology, same solver
+    control = sj.Control.make(1.0)  # full load, probe (if any) held at zero displacement
     frames = disc.frames(unravel(x))
 
     def fn(y):
-        return disc.residual(unravel(y), loads, frames)
+        return disc.residual(unravel(y), control, frames)
 
-    iteration = jax.jit(lambda y: js.solve(fn, y, -fn(y)))
-    assemble = jax.jit(lambda y: js.jacobian_values(fn, y))
+    def newton_iteration(y):  # residual + linearisation, coloured Jacobian, SuperLU factor + solve
+        f, lin = jax.linearize(fn, y)
+        state = js.factor(lin, y.shape[0], y.dtype, {})
+        step, _, stats = js.compute(state, -f, {})
+        return step, stats["sign"]
+
+    iteration = jax.jit(newton_iteration)
+    assemble = jax.jit(lambda y: js.values(fn, y))
     t0 = time.perf_counter()
     compiled = iteration.lower(x).compile()
     out["compile_s"] = time.perf_counter() - t0

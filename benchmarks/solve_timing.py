@@ -7,7 +7,10 @@ jointed 2D at n = 2, 5, 10, 20, 50 nodes (quick: 2, 5; 3D only 2) it reports
 * the median and minimum wall time of ``sj.solve`` (full public call, including the host
   side set-up and packaging; ``jax.block_until_ready`` on the result) over ``--repeats``
   (≥ 7) calls after the first;
-* the median of the compiled core alone (``socbjax._solve._continuation_jit``, private);
+* the median of the same solve compiled as one program through the public API,
+  ``jax.jit(lambda net, f: sj.solve(net, f, model=model).positions)`` (networks are pytrees:
+  jit traces only their values), i.e. without the host-side set-up and packaging of a plain
+  ``sj.solve`` call (column "jit ms", JSON ``jit_median_s``);
 * compile time = first call minus median;
 * Newton iterations and continuation steps, and the degrees of freedom (size of the flat
   state vector, ``ravel_pytree(sol.state)``).
@@ -42,7 +45,6 @@ def time_case(model: str, dim: int, n: int, repeats: int) -> dict:
     from jax.flatten_util import ravel_pytree
 
     import socbjax as sj
-    from socbjax import _solve
 
     net = sj.cantilever(n, dim=dim)
     force = [0.0, LOAD] + [0.0] * (dim - 2)
@@ -51,19 +53,22 @@ def time_case(model: str, dim: int, n: int, repeats: int) -> dict:
     rec = {"model": model, "dim": dim, "n": n, "first_call_s": first, "median_s": float(np.median(times)),
            "min_s": float(np.min(times)), "times_s": times, "compile_s": first - float(np.median(times)),
            "iterations": int(sol.iterations), "steps": int(sol.steps), "cutbacks": int(sol.cutbacks),
-           "dof": int(ravel_pytree(sol.state)[0].size), "converged": sol.converged}
-    try:  # compiled core only (private API): no host-side set-up or packaging
-        disc = sj.make_model(net, model)
-        loads = jnp.asarray(sj.forces_array(net, {-1: force}))
-        args = (disc, loads, disc.initial_state(), sj.NewtonSolver(), sj.ContinuationSettings())
-        core = []
+           "dof": int(ravel_pytree(sol.state)[0].size), "converged": bool(sol.converged)}
+    try:  # the same solve compiled as one program (public API): no host-side set-up or packaging
+        core = jax.jit(lambda net, f: sj.solve(net, f, model=model).positions)
+        loads = jnp.zeros((n, dim)).at[-1].set(jnp.asarray(force))
+        t0 = time.perf_counter()
+        jax.block_until_ready(core(net, loads))  # warm-up: compiles
+        rec["jit_first_call_s"] = time.perf_counter() - t0
+        jitted = []
         for _ in range(repeats):
             t0 = time.perf_counter()
-            jax.block_until_ready(_solve._continuation_jit(*args).state)
-            core.append(time.perf_counter() - t0)
-        rec["core_median_s"] = float(np.median(core))
+            jax.block_until_ready(core(net, loads))
+            jitted.append(time.perf_counter() - t0)
+        rec["jit_median_s"] = float(np.median(jitted))
     except Exception as exc:
-        rec["core_error"] = f"{type(exc).__name__}: {exc}"
+        rec["jit_error"] = f"{type(exc).__name__}: {exc}"
+        print(f"  {model} {dim}D n={n}: jit timing FAILED: {rec['jit_error'][:200]}")
     return rec
 
 
@@ -85,9 +90,9 @@ def main(argv=None) -> int:
 
     ms = lambda v: C.fmt(None if v is None else 1e3 * v, ".3g")  # noqa: E731
     C.print_table(
-        ["model", "dim", "n", "dof", "median ms", "min ms", "core ms", "compile s", "Newton it", "steps", "cutbacks"],
+        ["model", "dim", "n", "dof", "median ms", "min ms", "jit ms", "compile s", "Newton it", "steps", "cutbacks"],
         [[r["model"], r["dim"], r["n"], r.get("dof"), ms(r.get("median_s")), ms(r.get("min_s")),
-          ms(r.get("core_median_s")), C.fmt(r.get("compile_s"), ".2f"), r.get("iterations", r.get("error", "")),
+          ms(r.get("jit_median_s")), C.fmt(r.get("compile_s"), ".2f"), r.get("iterations", r.get("error", "")),
           r.get("steps"), r.get("cutbacks")] for r in results],
         title=f"static solve, cantilever P L²/EI = {LOAD}, {repeats} repeats after the first call")
 

@@ -20,7 +20,7 @@ from ._afm import ForceCurve, load_curve, save_curve  # noqa: E402
 from ._buckling import buckling_load  # noqa: E402
 from ._builders import SUPPORTS, cantilever, column  # noqa: E402
 from ._cache import enable_compilation_cache  # noqa: E402
-from ._compress import compress, probe_network  # noqa: E402
+from ._compress import compress  # noqa: E402
 from ._curve import FilamentCurve  # noqa: E402
 from ._dendritic import dendritic_outcrop, unit_dendritic_mesh  # noqa: E402
 from ._ensemble import EnsembleResult, compress_ensemble  # noqa: E402
@@ -39,6 +39,7 @@ from ._path import (  # noqa: E402
     NaturalParameter, NoRecorder, PathProblem, PathSettings, PathState, PseudoArclength, StepRecorder, follow_path, start_path,
 )
 from ._perturbation import strand_perturbation  # noqa: E402
+from ._probe import probe_network  # noqa: E402
 from ._protocol import Checkpoint  # noqa: E402
 from ._quadrature import coupling_matrix, gauss_legendre, quintic_coefficients  # noqa: E402
 from ._residual import Control, SOCBModel, SOCBState  # noqa: E402
@@ -48,7 +49,7 @@ from ._solution import RESULTS, ConvergenceError  # noqa: E402
 from ._solve import MODELS, default_atol, make_model, solve  # noqa: E402
 from ._sparsity import linear_solver_for  # noqa: E402
 
-__version__ = "0.2.0"
+from ._version import __version__  # noqa: E402
 
 __all__ = [
     "__version__",

@@ -29,7 +29,7 @@ import optimistix as optx
 
 from ._linear import DenseLU
 
-__all__ = ["ImplicitAdjoint", "implicit_solve"]
+__all__ = ["ImplicitAdjoint", "NonDifferentiable", "implicit_solve"]
 
 
 def _is_none(x):
@@ -102,3 +102,15 @@ class ImplicitAdjoint(optx.AbstractAdjoint):
         solver = DenseLU() if self.linear_solver is None else self.linear_solver
         root, residual = _implicit(primal_fn, rewrite_fn, inputs, solver)
         return root, jtu.tree_map(eqxi.nondifferentiable_backward, residual)
+
+
+class NonDifferentiable(optx.AbstractAdjoint):
+    """For solves that are never differentiated (the correctors of path following, whose
+    inputs are stopped): runs the loop as a plain ``lax.while_loop`` with no custom
+    derivative rule to trace.  Differentiating through it gives zero (stop_gradient)."""
+
+    def apply(self, primal_fn, rewrite_fn, inputs, tags):
+        del rewrite_fn, tags
+        dynamic, static = eqx.partition(inputs, eqx.is_inexact_array)
+        inputs = eqx.combine(jax.lax.stop_gradient(dynamic), static)
+        return primal_fn(inputs + (functools.partial(eqxi.while_loop, kind="lax"),))

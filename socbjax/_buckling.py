@@ -10,7 +10,8 @@ Eq. 9 and the end curvature derivatives are each linear in the force.
    on the host; the largest real μ > 0 gives the smallest P > 0 and its mode v₀.
 2. **Critical point** (the one root finder, :class:`socbjax.DampedNewton`): the bordered
    null-vector system G(v, P) = [J(P) v; v₀·v − 1] = 0 with the exact J(P) (one JVP of the
-   residual), from (v₀, P₀).
+   residual), from (v₀, P₀); its Newton steps take ∂(J(P)v)/∂P from the quadratic model
+   (B + 2PC) v, so the forward computation needs no second derivatives.
 3. **Derivatives** by the implicit function theorem on G (:class:`socbjax.ImplicitAdjoint`): with u
    the left null vector, dP/dθ = −uᵀ(∂J/∂θ)v / uᵀ(∂J/∂P)v — never through the iterations,
    so ``jax.grad``/``jax.jacfwd``/``jax.vmap``/``jax.jit`` apply (e.g. dPcr/dEI = Pcr/EI).
@@ -24,7 +25,7 @@ import jax.numpy as jnp
 import numpy as np
 from jax.flatten_util import ravel_pytree
 
-from ._adjoint import ImplicitAdjoint
+from ._adjoint import ImplicitAdjoint, NonDifferentiable
 from ._linear import DenseLU
 from ._network import Network, is_traced
 from ._residual import Control
@@ -89,10 +90,40 @@ def _companion_host(A, B, C):
     return np.asarray(1.0 / mu.real[k]), v / np.linalg.norm(v)
 
 
+def _jv(v, P, model, axis):
+    """J(P) v: one JVP of the residual at the straight state under axial compression P."""
+    x, f = _straight(model, axis, P)
+    return jax.jvp(f, (x,), (v,))[1]
+
+
 def _null_system(y, args):
+    """G(v, P) = [J(P) v; v₀·v − 1] (exact: its derivatives are those of the residual)."""
     model, axis, v0 = args
-    x, f = _straight(model, axis, y[-1])
-    return jnp.concatenate([jax.jvp(f, (x,), (y[:-1],))[1], (jnp.dot(v0, y[:-1]) - 1.0)[None]])
+    return jnp.concatenate([_jv(y[:-1], y[-1], model, axis), (jnp.dot(v0, y[:-1]) - 1.0)[None]])
+
+
+@eqx.filter_custom_jvp
+def _jv_modelled(v, P, B, C, model, axis):
+    return _jv(v, P, model, axis)
+
+
+@_jv_modelled.def_jvp
+def _jv_modelled_jvp(primals, tangents):
+    """∂(J(P)v)/∂P from the quadratic model, (B + 2PC) v: Newton on G then needs no second
+    derivatives of the residual (exact for SOCB; a slightly inexact tangent otherwise, which
+    only slows the Newton iteration: its residual is exact)."""
+    v, P, B, C, model, axis = primals
+    tv, tP = tangents[0], tangents[1]
+    out = _jv(v, P, model, axis)
+    t = _jv(jnp.zeros_like(v) if tv is None else tv, P, model, axis)
+    if tP is not None:
+        t = t + (B + 2 * P * C) @ v * tP
+    return out, t
+
+
+def _null_system_modelled(y, args):
+    model, axis, v0, B, C = args
+    return jnp.concatenate([_jv_modelled(y[:-1], y[-1], B, C, model, axis), (jnp.dot(v0, y[:-1]) - 1.0)[None]])
 
 
 def _buckling_primal(inputs):
@@ -104,7 +135,8 @@ def _buckling_primal(inputs):
     out = (jax.ShapeDtypeStruct((), A.dtype), jax.ShapeDtypeStruct((n,), A.dtype))
     P0, v0 = jax.pure_callback(_companion_host, out, A, B, C, vmap_method="sequential")
     solver = DampedNewton(atol=1e-11, max_iterations=30, linear_solver=DenseLU())
-    sol = root_find(_null_system, jnp.concatenate([v0, P0[None]]), (model, axis, v0), solver=solver)
+    sol = root_find(_null_system_modelled, jnp.concatenate([v0, P0[None]]), (model, axis, v0, B, C), solver=solver,
+                    adjoint=NonDifferentiable())
     result = RESULTS.where(jnp.isfinite(P0), newton_result(sol), RESULTS.singular)
     return sol.value, (result, v0)
 

@@ -12,204 +12,22 @@ compressive positive.
 
 from __future__ import annotations
 
-import json
 from pathlib import Path
 
 import equinox as eqx
-import jax
-import jax.numpy as jnp
-import numpy as np
-from jax.flatten_util import ravel_pytree
 
-from ._network import Network, add_direction, is_traced
-from ._path import PROBE_PATH, PathSettings
-from ._perturbation import default_perturbation, perturbation_pattern, perturbation_plan, strand_segments
+from ._network import Network, is_traced
+from ._path import PathSettings
+from ._probe import applied_loads, check_compress_inputs, compress_settings, package_path
 from ._protocol import Checkpoint, Progress, run_phases
 from ._quadrature import get_quadrature
-from ._residual import SOCBModel, routed_nodal_force, state_tangents
-from ._result import PHASES, CompressionResult, LimitPoint
+from ._residual import SOCBModel
+from ._result import CompressionResult
+from ._sampled import compress_at
 from ._solution import ConvergenceError, result_message
 from ._sparsity import linear_solver_for
 
-__all__ = ["compress", "probe_network", "probe_gap", "applied_loads", "observe", "compress_settings", "end_nodes",
-           "check_compress_inputs", "package_path", "parameters_json"]
-
-
-def _is_chain(network: Network) -> bool:
-    seg = network.segments
-    return network.n_junctions == 0 and np.array_equal(seg, np.stack([np.arange(len(seg)), np.arange(1, len(seg) + 1)], 1))
-
-
-def probe_network(network: Network) -> Network:
-    """``network`` itself if it has probe nodes; for a single filament (e.g.
-    :func:`socbjax.column`) the last node becomes the probe, moving toward the first node."""
-    if network.has_probe:
-        return network
-    if not _is_chain(network):
-        raise ValueError("the network has no probe nodes; build it with make_network(..., probe=[...]) or a builder "
-                         "such as socbjax.dendritic_outcrop")
-    if is_traced(network.positions):
-        raise TypeError("a network without probe nodes needs concrete positions to place its probe (the probe "
-                        "direction is topology); call socbjax.probe_network on it outside jax transformations")
-    pos = np.asarray(network.positions)
-    direction = (pos[0] - pos[-1]) / np.linalg.norm(pos[0] - pos[-1])
-    projector = np.array(network.position_projector)
-    projector[-1] = add_direction(projector[-1:], direction)[0]
-    probe = np.zeros(network.n_nodes, bool)
-    probe[-1] = True
-    return network.with_topology(position_projector=projector, probe=probe, probe_direction=direction)
-
-
-def end_nodes(network: Network) -> np.ndarray:
-    """Supported non-probe nodes that are not daughter bases (strand ends on the surface)."""
-    fixed = np.einsum("nii->n", network.position_projector) > 0.5
-    return np.flatnonzero(fixed & ~network.probe & ~network.attached)
-
-
-def probe_gap(network: Network) -> float:
-    """Largest probe travel (µm) before the probe meets the farthest opposing support (inf if
-    none; host side, concrete positions)."""
-    pos, probe = np.asarray(network.positions), network.probe
-    fixed = (np.einsum("nii->n", network.position_projector) > 0.5) & ~probe
-    if not fixed.any():
-        return np.inf
-    return float(((pos[fixed] - pos[probe].mean(axis=0)) @ network.probe_direction).max())
-
-
-def applied_loads(network: Network, perturbation) -> jax.Array:
-    """The loads [N, d] (pN) compressions apply: the network's loads plus ``perturbation``
-    (pN) on every strand's middle; with ``perturbation=None`` the network's loads, or, if it
-    has none, the default 1e-4 EI/L² per strand.  Traced in all values (the choice between
-    "has loads" and "default" is a traced select)."""
-    if perturbation is not None and not is_traced(perturbation):
-        value = np.asarray(perturbation, dtype=float)
-        if value.shape != () or not np.isfinite(value) or value < 0:
-            raise ValueError(f"perturbation must be a non-negative lateral force (pN), got {perturbation!r}")
-    plan = perturbation_plan(network)
-    pattern = perturbation_pattern(network.positions, plan, network.probe_direction, network.n_nodes)
-    if perturbation is not None:
-        return network.loads + jnp.asarray(perturbation, jnp.float64) * pattern
-    default = default_perturbation(network.EI, network.lengths, strand_segments(network)) * pattern
-    return jnp.where(jnp.any(network.loads != 0), network.loads, default)
-
-
-def compress_settings(settings, method, displacement) -> PathSettings:
-    """``settings`` (a PathSettings, or None) filled with the compression defaults; ``method``
-    overrides; steps capped at a quarter of ``displacement``."""
-    settings = PathSettings() if settings is None else settings
-    if not isinstance(settings, PathSettings):
-        raise TypeError(f"settings must be a socbjax.PathSettings, got {type(settings).__name__}")
-    if method is not None:
-        settings = settings.replace(method=method)
-        if method not in ("displacement", "arclength"):
-            raise ValueError(f"method must be 'displacement' or 'arclength', got {method!r}")
-    settings = settings.filled(**PROBE_PATH)
-    if settings.method not in ("displacement", "arclength"):
-        raise ValueError(f"method must be 'displacement' or 'arclength', got {settings.method!r}")
-    if not is_traced(displacement) and settings.max_step > 0.25 * float(displacement):
-        cap = 0.25 * float(displacement)
-        initial = min(settings.initial_step, cap)
-        settings = settings.replace(max_step=cap, initial_step=initial, min_step=min(settings.min_step, initial))
-    return settings
-
-
-def check_compress_inputs(network, displacement):
-    if not isinstance(network, Network):
-        raise TypeError(f"network must be a socbjax Network (e.g. socbjax.column(...)), got {type(network).__name__}")
-    network = probe_network(network)
-    if is_traced(displacement):
-        return network, displacement
-    u = float(displacement)
-    if not np.isfinite(u) or u <= 0:
-        raise ValueError(f"displacement must be a positive probe travel (µm), got {displacement!r}")
-    if not is_traced(network.positions):
-        gap = probe_gap(network)
-        if not np.isfinite(gap):
-            raise ValueError("nothing supports the network opposite the probe (no fixed node other than probe nodes): "
-                             "compressing it would only translate it; e.g. grow the outcrop until strands reach the surface")
-        if u >= gap:
-            raise ValueError(f"displacement {u} µm reaches the opposing support (gap {gap:.4g} µm between probe and "
-                             "surface); choose a smaller displacement")
-    return network, u
-
-
-@eqx.filter_jit
-def observe(model, X, loads):
-    """Per row of flat states X [K, n]: positions, tangents, moments, segment forces, probe
-    force (compressive positive) and the axial force at every node."""
-    net = model.network
-    _, unravel = ravel_pytree(model.initial_state())
-
-    def one(x):
-        st = unravel(x)
-        axial = routed_nodal_force(st.forces, net, loads) @ jnp.asarray(net.probe_direction)
-        return st.positions, state_tangents(st.directors, net.dim), st.moments, st.forces, jnp.sum(jnp.where(net.probe, axial, 0.0)), -axial
-
-    return jax.vmap(one)(X)
-
-
-def _limit_points(U, F, SIGN, PHASE) -> tuple[LimitPoint, ...]:
-    """Events between consecutive recorded steps of each phase (see :class:`LimitPoint`)."""
-    events = []
-    for phase in (1, 2):
-        idx = np.flatnonzero(PHASE == phase)
-        if not idx.size or idx[0] == 0:
-            continue
-        idx = np.concatenate([[idx[0] - 1], idx])  # start from the phase's first point
-        du, dF = np.diff(U[idx]), np.diff(F[idx])
-        tiny = 1e-9 * max(float(np.abs(F[idx]).max()), 1e-300)
-        su = np.sign(np.where(np.abs(du) > 1e-12, du, 0.0))
-        sF = np.sign(np.where(np.abs(dF) > tiny, dF, 0.0))  # force rising or falling along the path
-        folds = set()
-        for j in range(1, len(du)):
-            at = int(idx[j])
-            if su[j] * su[j - 1] < 0:
-                folds.add(at)
-                events.append(LimitPoint("fold", at, float(U[at]), float(F[at]), PHASES[phase]))
-            elif sF[j] * sF[j - 1] < 0:
-                kind = "force_maximum" if sF[j - 1] > 0 else "force_minimum"
-                events.append(LimitPoint(kind, at, float(U[at]), float(F[at]), PHASES[phase]))
-        for j in range(len(du)):
-            a, b = int(idx[j]), int(idx[j + 1])
-            if SIGN[a] != SIGN[b] and not folds & {a, b}:
-                events.append(LimitPoint("bifurcation", b, float(U[b]), float(F[b]), PHASES[phase]))
-    return tuple(sorted(events, key=lambda e: e.step))
-
-
-def parameters_json(params: dict) -> str:
-    return json.dumps(params, default=lambda o: o.tolist() if hasattr(o, "tolist") else float(o), sort_keys=True)
-
-
-def observe_rows(model, X: np.ndarray, capacity: int):
-    """:func:`observe` of the K rows of X [K, n] (host), padded to ``capacity`` rows so that
-    paths of any length share one compiled program."""
-    K = X.shape[0]
-    padded = np.zeros((max(capacity, K), X.shape[1]), X.dtype)
-    padded[:K] = X
-    padded[K:] = X[-1]
-    return [np.asarray(a)[:K] for a in observe(model, jnp.asarray(padded), model.network.loads)]
-
-
-def package_path(model, rec, extra, result, settings, u_max, unload, parameters) -> CompressionResult:
-    net = model.network
-    capacity = settings.max_steps * (3 if unload else 2) + 1  # settle point + every phase's buffer
-    positions, tangents, moments, forces, probe_force, axial = observe_rows(model, rec["X"], capacity)
-    ends = end_nodes(net)
-    sign_ref = extra.get("sign_ref", rec["SIGN"][0])
-    params = {"displacement_um": u_max, "unload": bool(unload), "method": settings.method, "sampled": False,
-              "quadrature_order": settings.quadrature_order, "settled_displacement_um": float(extra.get("u0", 0.0)),
-              "perturbation_pN": float(np.abs(np.asarray(net.loads)).sum(axis=-1).max()),
-              "settings": {f: getattr(settings, f) for f in settings.__dataclass_fields__},
-              "n_nodes": int(net.n_nodes), "n_segments": int(net.n_segments), "n_junctions": int(net.n_junctions),
-              "gap_um": probe_gap(net) if np.isfinite(probe_gap(net)) else None, **(parameters or {})}
-    return CompressionResult(
-        displacement=np.asarray(rec["U"]), force=probe_force, converged=np.ones(len(rec["U"]), bool),
-        stable=rec["SIGN"] == sign_ref, phase=rec["PHASE"].astype(np.int8), positions=positions, tangents=tangents,
-        moments=moments, segment_forces=forces, end_nodes=ends, end_forces=axial[:, ends],
-        iterations=rec["ITER"].astype(np.int32), result=result, network=net,
-        limit_points=_limit_points(np.asarray(rec["U"]), probe_force, rec["SIGN"], rec["PHASE"]),
-        parameters_json=parameters_json(params),
-    )
+__all__ = ["compress"]
 
 
 def _checkpoint(checkpoint) -> Checkpoint | None:
@@ -266,8 +84,6 @@ def compress(network: Network, displacement, *, at=None, unload: bool = False, m
     if at is not None or is_traced(network, perturbation, displacement):
         if checkpoint is not None:
             raise ValueError("checkpoint applies to full paths; compress(..., at=...) is one traced computation")
-        from ._sampled import compress_at
-
         return compress_at(model, displacement, at, unload=unload, perturbation=perturbation, settings=settings,
                            throw=throw, parameters=parameters)
     model = eqx.tree_at(lambda m: m.network, model, network.replace(loads=applied_loads(network, perturbation)))

@@ -10,7 +10,7 @@ from pathlib import Path
 
 import numpy as np
 
-from . import __version__
+from ._version import __version__
 from ._buckling import buckling_load
 from ._builders import cantilever, column
 from ._solve import solve

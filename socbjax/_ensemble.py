@@ -35,14 +35,15 @@ from jax.flatten_util import ravel_pytree
 from jax.sharding import Mesh, NamedSharding
 from jax.sharding import PartitionSpec as P
 
-from ._compress import check_compress_inputs, package_path, applied_loads, compress_settings
+from ._probe import applied_loads, check_compress_inputs, compress_settings, package_path, probe_network
 from ._linear import DenseLU, lu_sign
-from ._network import Network
+from ._network import Network, is_traced
 from ._path import StepRecorder, follow_path, start_path
 from ._protocol import UNLOAD_MARGIN, phase_problem, settled_displacement
 from ._quadrature import get_quadrature
 from ._residual import SOCBModel
 from ._result import CompressionResult
+from ._sampled import compress_at
 from ._solution import RESULTS, ConvergenceError, result_from_name, result_message, result_name
 from ._sparsity import linear_solver_for
 
@@ -130,6 +131,8 @@ def _difference(a: Network, b: Network) -> str:
 def _member_perturbations(perturbation, B: int) -> list:
     if perturbation is None or np.ndim(perturbation) == 0:
         return [perturbation] * B
+    if is_traced(perturbation) and np.ndim(perturbation) == 1 and np.shape(perturbation)[0] == B:
+        return [perturbation[i] for i in range(B)]
     values = list(np.asarray(perturbation, dtype=float).ravel()) if np.ndim(perturbation) == 1 else None
     if values is None or len(values) != B:
         raise ValueError(f"perturbation must be None, one force (pN) or one per member ({B}), got shape {np.shape(perturbation)}")
@@ -268,7 +271,7 @@ class _Batch:
 
     def _finish(self, index, state, b):
         k = int(_to_host(state.steps)[b])
-        rec = {name: _to_host(v)[b, :k] for name, v in state.recorder.items()}
+        rec = {name: _to_host(v)[b, :k] for name, v in vars(state.recorder).items()}
         x = _to_host(state.x)[b]
         self.work[b, index] = int(_to_host(state.attempts)[b]), int(_to_host(state.iterations)[b])
         self.status[b] = result_name(jax.tree_util.tree_map(lambda a: _to_host(a)[b], state.result))
@@ -311,8 +314,27 @@ def _results(batch: _Batch, models, settings, unload) -> EnsembleResult:
 
 
 # -------------------------------------------------------------------------------- API
-def compress_ensemble(networks: Sequence[Network], displacement: float, *, unload: bool = False, method: str | None = None,
-                      perturbation=None, settings=None, devices=None, progress: bool = False,
+def _sampled_ensemble(nets, displacement, at, unload, perturbations, settings, throw) -> EnsembleResult:
+    """The members sampled at ``at``: ``jax.vmap`` of the traced ``compress(..., at=...)``
+    over the stacked members (one compiled program; jit/grad/jacfwd/vmap apply)."""
+    quad = get_quadrature(settings.quadrature_order)
+    nets = [probe_network(n) for n in nets]
+    members = [n.replace(loads=applied_loads(n, p)) for n, p in zip(nets, perturbations)]
+    stacked = _stack(members)
+
+    def one(net):
+        return compress_at(SOCBModel(net, quad), displacement, at, unload=unload, settings=settings, throw=throw)
+
+    batched = jax.vmap(one)(stacked)
+    B = len(members)
+    results = tuple(jax.tree_util.tree_map(lambda a, i=i: a[i], batched) for i in range(B))
+    zeros = np.zeros((B, 3 if unload else 2), np.int64)
+    M = batched.displacement.shape[1]
+    return EnsembleResult(batched.displacement, batched.force, batched.phase, np.full(B, M), results, zeros, zeros)
+
+
+def compress_ensemble(networks: Sequence[Network], displacement: float, *, at=None, unload: bool = False,
+                      method: str | None = None, perturbation=None, settings=None, devices=None, progress: bool = False,
                       throw: bool = True) -> EnsembleResult:
     """Compress every network of an ensemble by ``displacement`` µm: the protocol of
     :func:`socbjax.compress`, run for the whole batch as one compiled, vmapped continuation.
@@ -326,6 +348,11 @@ def compress_ensemble(networks: Sequence[Network], displacement: float, *, unloa
         different seeds differ in topology: they are separate ensembles.
     displacement : probe travel (µm), the same for every member; must stay below each
         member's probe–surface gap.
+    at : probe displacements (µm, [M]) at which to sample every member, as
+        ``compress(..., at=...)`` does: then the whole ensemble is one traced, vmapped program
+        (``jax.jit``, ``jax.grad``, ``jax.jacfwd``, ``jax.vmap`` apply; derivatives by the
+        implicit function theorem) and the result's curves are [B, M] (``attempts`` and
+        ``newton_iterations`` are zero).  Traced inputs imply ``at`` (64 equal steps).
     unload, method, settings : as for :func:`socbjax.compress` (one Jacobian-solver
         preparation serves the batch).
     perturbation : None (each member's loads, else the default 1e-4 EI/L² per strand), one
@@ -348,8 +375,12 @@ def compress_ensemble(networks: Sequence[Network], displacement: float, *, unloa
     """
     nets = _check_members(networks)
     perturbations = _member_perturbations(perturbation, len(nets))
-    mesh = _resolve_devices(devices)
     settings = compress_settings(settings, method, displacement)
+    if at is not None or is_traced(nets, perturbation, displacement):
+        if devices is not None:
+            raise ValueError("devices applies to full paths; for sampled ensembles shard the inputs of your jitted function")
+        return _sampled_ensemble(nets, displacement, at, unload, perturbations, settings, throw)
+    mesh = _resolve_devices(devices)
     models = []
     for i, (net, pert) in enumerate(zip(nets, perturbations)):
         try:

@@ -18,7 +18,14 @@ from ._curve import FilamentCurve, filament_curve
 from ._network import Network
 from ._solution import RESULTS, result_message
 
-__all__ = ["Solution"]
+__all__ = ["Solution", "node_stiffness"]
+
+
+def node_stiffness(network: Network):
+    """EI at every node [N] (pN·µm²): the mean over the segments that meet there."""
+    seg = np.concatenate([network.segments[:, 0], network.segments[:, 1]])
+    total = jnp.zeros(network.n_nodes).at[seg].add(jnp.concatenate([network.EI, network.EI]))
+    return total / np.maximum(np.bincount(seg, minlength=network.n_nodes), 1)
 
 
 class Solution(eqx.Module):

@@ -41,6 +41,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from ._network import DIFFERENTIABLE_FIELDS, Network, Topology
+from ._version import __version__
 from ._result import PHASES, CompressionResult, LimitPoint
 from ._solution import LEGACY_STATUS, result_from_name, result_name
 
@@ -165,7 +166,7 @@ def atomic_path(path, write) -> Path:
 
 def _atomic_write(path, fill, fmt: str) -> Path:
     """Atomically write an HDF5 file stamped with ``fmt`` and filled by ``fill(file)``."""
-    from . import __version__
+
 
     def write(tmp_path: Path) -> None:
         with h5py.File(tmp_path, "w") as f:
@@ -180,7 +181,7 @@ def _atomic_write(path, fill, fmt: str) -> Path:
 
 def _open(path, fmt: str) -> h5py.File:
     """Open a socbjax file for reading after checking ``format`` and ``format_version``."""
-    from . import __version__
+
 
     path = Path(path).expanduser()
     if not path.exists():

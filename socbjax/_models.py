@@ -35,7 +35,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from ._builders import column
-from ._compress import probe_gap, probe_network
+from ._probe import probe_gap, probe_network
 from ._perturbation import strand_segments
 from ._dendritic import dendritic_outcrop, unit_dendritic_mesh
 from ._network import Network

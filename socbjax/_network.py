@@ -181,7 +181,9 @@ class Network(eqx.Module):
         new = {}
         for name, value in values.items():
             old = getattr(self, name)
-            arr = jnp.broadcast_to(jnp.asarray(value, jnp.float64), old.shape) if jnp.ndim(value) == 0 else jnp.asarray(value, jnp.float64)
+            xp = jnp if is_traced(value) or isinstance(value, jax.Array) else np  # concrete stays numpy (see _value)
+            arr = xp.asarray(value, dtype=np.float64)
+            arr = xp.broadcast_to(arr, old.shape) if arr.ndim == 0 else arr
             if arr.shape != old.shape:
                 raise ValueError(f"Network.replace: {name} must have shape {old.shape}, got {arr.shape}")
             new[name] = arr
@@ -227,9 +229,13 @@ def _as_node_array(name: str, value, n: int, dtype, default) -> np.ndarray:
 
 
 def _value(name: str, value, shape: tuple, unit: str):
-    """(jax array of ``shape``, concrete numpy copy or None when traced); scalars broadcast."""
+    """(array of ``shape``, concrete numpy copy or None when traced); scalars broadcast.
+
+    Concrete values stay numpy arrays in the network: inside ``jax.jit`` even
+    ``jnp.asarray`` of a constant is a tracer, and the host-side logic that needs concrete
+    geometry (probe placement, input checks) must still see it."""
     if value is None:
-        return jnp.zeros(shape), np.zeros(shape)
+        return np.zeros(shape), np.zeros(shape)
     if is_traced(value):
         arr = jnp.asarray(value, jnp.float64)
         arr = jnp.broadcast_to(arr, shape) if arr.ndim == 0 or (arr.ndim == 1 and len(shape) == 1 and arr.shape == (1,)) else arr
@@ -243,7 +249,8 @@ def _value(name: str, value, shape: tuple, unit: str):
         raise ValueError(f"{name} must have shape {shape} ({unit}), got {arr.shape}")
     if not np.all(np.isfinite(arr)):
         raise ValueError(f"{name} contains NaN or infinite values; give finite {unit}")
-    return jnp.asarray(arr), arr.copy()
+    arr = np.array(arr, copy=True)
+    return arr, arr
 
 
 def _check_segments(segments, n) -> np.ndarray:

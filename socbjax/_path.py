@@ -42,13 +42,14 @@ import numpy as np
 from jax.flatten_util import ravel_pytree
 from jaxtyping import Array
 
+from ._adjoint import NonDifferentiable
 from ._linear import Bordered
 from ._residual import Control
 from ._root import DampedNewton, newton_result, root_find
 from ._solution import RESULTS
 
-__all__ = ["PathSettings", "NaturalParameter", "PseudoArclength", "PathProblem", "PathState", "NoRecorder",
-           "StepRecorder", "follow_path", "start_path", "parametrisation"]
+__all__ = ["PathSettings", "NaturalParameter", "PseudoArclength", "PathProblem", "PathState", "PathPoint", "NoRecorder",
+           "StepRecorder", "StepRecords", "follow_path", "start_path", "parametrisation"]
 
 METHODS = ("displacement", "load", "natural", "arclength")
 
@@ -226,38 +227,66 @@ def _correct(problem, guess, border, newton):
     frames = problem.frames(guess[:-1])
     args = jax.lax.stop_gradient((problem, frames, border[0], border[1], guess))
     sol = root_find(_corrector_fn, jax.lax.stop_gradient(guess), args, solver=newton,
-                    options={"linear": {"border": args[2:4]}})
+                    options={"linear": {"border": args[2:4]}}, adjoint=NonDifferentiable())
     state = sol.state
     return sol.value, newton_result(sol), state.iterations, state.stats["sign"], state.stats["tangent"], state.residual_norm
 
 
 # ---------------------------------------------------------------------- recorders
+class PathPoint(eqx.Module):
+    """A point of the path handed to recorders: state x, parameter p, sign(det J), unit
+    tangent tau [n + 1] and the Newton iterations that found it."""
+
+    x: Array
+    p: Array
+    sign: Array
+    tau: Array
+    iterations: Array
+
+
 class NoRecorder(eqx.Module):
     """Keeps nothing (load ramps of :func:`socbjax.solve`)."""
 
     def init(self, x0, p0):
         return None
 
-    def record(self, rec, ok, index, previous, new):
+    def record(self, rec, ok, index, previous: PathPoint, new: PathPoint):
         return rec
 
 
+class StepRecords(eqx.Module):
+    """Buffers of :class:`StepRecorder` (m rows): X [m, n], P, SIGN (sign det J), TAU_P
+    (dp/ds of the unit tangent) [m], ITER [m] (Newton iterations)."""
+
+    X: Array
+    P: Array
+    SIGN: Array
+    TAU_P: Array
+    ITER: Array
+
+    def rows(self, k: int) -> dict:
+        """The first k rows as numpy arrays (sliced on the host: no program per k)."""
+        return {name: np.asarray(getattr(self, name))[:k] for name in ("X", "P", "SIGN", "TAU_P", "ITER")}
+
+
 class StepRecorder(eqx.Module):
-    """Every accepted step: X [m, n], P [m], SIGN [m] (sign det J), TAU_P [m] (dp/ds of the
-    unit tangent), ITER [m] (Newton iterations); m = ``capacity``."""
+    """Every accepted step into :class:`StepRecords` of ``capacity`` rows."""
 
     capacity: int = eqx.field(static=True)
 
-    def init(self, x0, p0):
+    def init(self, x0, p0) -> StepRecords:
         m, n = self.capacity, x0.shape[0]
-        return dict(X=jnp.zeros((m, n), x0.dtype), P=jnp.zeros(m, x0.dtype), SIGN=jnp.zeros(m, x0.dtype),
-                    TAU_P=jnp.zeros(m, x0.dtype), ITER=jnp.zeros(m, jnp.int32))
+        zeros = jnp.zeros(m, x0.dtype)
+        return StepRecords(X=jnp.zeros((m, n), x0.dtype), P=zeros, SIGN=zeros, TAU_P=zeros, ITER=jnp.zeros(m, jnp.int32))
 
-    def record(self, rec, ok, index, previous, new):
-        idx = jnp.minimum(index, self.capacity - 1)
-        values = dict(X=new["x"], P=new["p"], SIGN=new["sign"], TAU_P=new["tau"][-1], ITER=new["iterations"])
-        # select the row, not the buffer: an in-place row update instead of a copy of [m, n]
-        return {k: rec[k].at[idx].set(jnp.where(ok, values[k], rec[k][idx])) for k in rec}
+    def record(self, rec: StepRecords, ok, index, previous: PathPoint, new: PathPoint) -> StepRecords:
+        i = jnp.minimum(index, self.capacity - 1)
+
+        def put(buffer, value):  # select the row, not the buffer: an in-place row update, not a copy of [m, n]
+            return buffer.at[i].set(jnp.where(ok, value, buffer[i]))
+
+        return StepRecords(X=put(rec.X, new.x), P=put(rec.P, new.p), SIGN=put(rec.SIGN, new.sign),
+                           TAU_P=put(rec.TAU_P, new.tau[-1]), ITER=put(rec.ITER, new.iterations))
 
 
 # ------------------------------------------------------------------------- state
@@ -308,7 +337,8 @@ def start_path(x0, p0, settings: PathSettings, recorder) -> PathState:
 
 
 def _predict(c: PathState, problem, param, settings):
-    """(guess [n + 1], predicted length h, border row) of the next attempt (or the start)."""
+    """(last point y [n + 1], predictor guess [n + 1], border row (a, b)) of the next attempt
+    (at the start: the start itself, held at its p)."""
     tau = c.tau
     reach = jnp.where(tau[-1] > 0, (1.0 - c.p) / jnp.where(tau[-1] > 0, tau[-1], 1.0), jnp.inf)
     landing = (reach <= c.ds) | ~c.primed
@@ -347,8 +377,9 @@ def _attempt(c: PathState, problem, param, settings, newton, recorder) -> PathSt
     primed = c.primed
     fast = iterations <= settings.fast_iterations
     grown = jnp.minimum(jnp.where(fast, settings.grow, 1.0) * c.ds, settings.max_step)
-    new = dict(x=y1[:-1], p=y1[-1], sign=sign, tau=tau1, iterations=iterations)
-    rec = recorder.record(c.recorder, ok & primed, c.steps, dict(x=c.x, p=c.p, sign=c.sign), new)
+    new = PathPoint(x=y1[:-1], p=y1[-1], sign=sign, tau=tau1, iterations=iterations)
+    previous = PathPoint(x=c.x, p=c.p, sign=c.sign, tau=c.tau, iterations=jnp.zeros((), jnp.int32))
+    rec = recorder.record(c.recorder, ok & primed, c.steps, previous, new)
     steps = c.steps + (ok & primed).astype(jnp.int32)
     attempts = c.attempts + primed.astype(jnp.int32)
     natural = not param.passes_folds

@@ -17,7 +17,7 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array
 
-from ._equilibrium import Solution
+from ._equilibrium import Solution, node_stiffness
 from ._network import Network
 from ._residual import SOCBState, net_nodal_force
 from ._solution import RESULTS, result_message
@@ -123,7 +123,7 @@ class CompressionResult(eqx.Module):
         net = self.network
         i = int(i) if not isinstance(i, (jnp.ndarray, np.ndarray)) else i
         positions, tangents, moments, forces = (self.positions[i], self.tangents[i], self.moments[i], self.segment_forces[i])
-        EI = jnp.zeros(net.n_nodes).at[net.segments.ravel()].set(jnp.repeat(net.EI, 2))
+        EI = node_stiffness(net)
         if net.dim == 2:
             angles = jnp.arctan2(tangents[:, 1], tangents[:, 0])
             directors, curvatures = angles, moments / EI

@@ -35,11 +35,12 @@ from jax.flatten_util import ravel_pytree
 from jaxtyping import Array
 
 from ._adjoint import ImplicitAdjoint
-from ._compress import applied_loads, end_nodes, observe, parameters_json, probe_gap
+from ._probe import applied_loads, end_nodes, observe, parameters_json, probe_gap
 from ._network import is_traced
 from ._protocol import UNLOAD_MARGIN, phase_problem, settled_displacement
 from ._residual import Control
 from ._result import CompressionResult
+from ._linear import BlockDiagonal
 from ._root import DampedNewton, root_find
 from ._path import follow_path, start_path
 from ._solution import RESULTS, ConvergenceError, result_message
@@ -50,6 +51,16 @@ __all__ = ["compress_at", "SampleRecorder", "DEFAULT_SAMPLES"]
 DEFAULT_SAMPLES = 64
 
 
+class Samples(eqx.Module):
+    """Buffers of :class:`SampleRecorder` (B samples): warm starts X [B, n], whether each was
+    reached (``hit``), and sign(det J) at its two bracketing steps (``SA``, ``SB``)."""
+
+    X: Array
+    hit: Array
+    SA: Array
+    SB: Array
+
+
 class SampleRecorder(eqx.Module):
     """Warm starts at the first crossing of each target ``targets`` [B] (in the phase's path
     parameter p ∈ [0, 1]) by the accepted steps; only ``active`` [B] targets are recorded."""
@@ -57,21 +68,21 @@ class SampleRecorder(eqx.Module):
     targets: Array
     active: Array
 
-    def init(self, x0, p0):
+    def init(self, x0, p0) -> Samples:
         B, n = self.targets.shape[0], x0.shape[0]
         zeros = jnp.zeros(B, x0.dtype)
-        return dict(X=jnp.zeros((B, n), x0.dtype), hit=jnp.zeros(B, bool), SA=zeros, SB=zeros)
+        return Samples(X=jnp.zeros((B, n), x0.dtype), hit=jnp.zeros(B, bool), SA=zeros, SB=zeros)
 
-    def record(self, rec, ok, index, previous, new):
-        p, p1, t = previous["p"], new["p"], self.targets
-        crossed = ok & self.active & ~rec["hit"] & ((p - t) * (p1 - t) <= 0)
+    def record(self, rec: Samples, ok, index, previous, new) -> Samples:
+        p, p1, t = previous.p, new.p, self.targets
+        crossed = ok & self.active & ~rec.hit & ((p - t) * (p1 - t) <= 0)
         dp = p1 - p
         w = jnp.clip(jnp.where(dp != 0, (t - p) / jnp.where(dp != 0, dp, 1.0), 0.0), 0.0, 1.0)[:, None]
-        x, x1 = previous["x"][None, :], new["x"][None, :]
-        same_side = previous["sign"] == new["sign"]
+        x, x1 = previous.x[None, :], new.x[None, :]
+        same_side = previous.sign == new.sign
         warm = jnp.where(same_side, (1 - w) * x + w * x1, jnp.where(w >= 0.5, x1, x))
-        return dict(X=jnp.where(crossed[:, None], warm, rec["X"]), hit=rec["hit"] | crossed,
-                    SA=jnp.where(crossed, previous["sign"], rec["SA"]), SB=jnp.where(crossed, new["sign"], rec["SB"]))
+        return Samples(X=jnp.where(crossed[:, None], warm, rec.X), hit=rec.hit | crossed,
+                       SA=jnp.where(crossed, previous.sign, rec.SA), SB=jnp.where(crossed, new.sign, rec.SB))
 
 
 def _phase_targets(index, at, unload, u0, u_max):
@@ -119,23 +130,27 @@ def _clip(u, lower, upper):
 
 
 def _resolve_fn(y, args):
-    model, frames, u = args
-    return model.residual(ravel_pytree(model.initial_state())[1](y), Control.make(1.0, u), frames)
+    model, frames, U = args
+    unravel = ravel_pytree(model.initial_state())[1]
+    X = y.reshape(U.shape[0], -1)
+    return jax.vmap(lambda x, f, u: model.residual(unravel(x), Control.make(1.0, u), f))(X, frames, U).reshape(-1)
 
 
 def _resolve(model, X, U, settings, inner):
-    """Each sample's equilibrium from its warm start (vmapped), implicit derivatives."""
+    """Every sample's equilibrium from its warm start, as one block-diagonal root find (one
+    Newton iteration serves all samples; each block factored on its own), with implicit
+    derivatives: (X [B, n], Newton iterations, ‖F‖∞ per sample)."""
+    B = X.shape[0]
+    blocks = BlockDiagonal(inner, B)
     solver = DampedNewton(atol=1e-2 * settings.atol, max_iterations=settings.max_iterations,
-                          max_backtracks=settings.max_backtracks, linear_solver=inner)
+                          max_backtracks=settings.max_backtracks, linear_solver=blocks)
     unravel = ravel_pytree(model.initial_state())[1]
-
-    def one(x0, u):
-        frames = jax.lax.stop_gradient(model.frames(unravel(x0)))  # analysis basis only
-        sol = root_find(_resolve_fn, jax.lax.stop_gradient(x0), (model, frames, u), solver=solver,
-                        adjoint=ImplicitAdjoint(inner))
-        return sol.value, sol.state.iterations, sol.state.residual_norm
-
-    return jax.vmap(one)(X, U)
+    warm = jax.lax.stop_gradient(X)
+    frames = jax.lax.stop_gradient(jax.vmap(lambda x: model.frames(unravel(x)))(warm))  # analysis bases only
+    sol = root_find(_resolve_fn, warm.reshape(-1), (model, frames, U), solver=solver, adjoint=ImplicitAdjoint(blocks))
+    X = sol.value.reshape(B, -1)
+    residual = jnp.max(jnp.abs(jax.lax.stop_gradient(_resolve_fn(sol.value, (model, frames, U))).reshape(B, -1)), axis=1)
+    return X, jnp.full(B, sol.state.iterations), residual
 
 
 @eqx.filter_jit
@@ -148,11 +163,11 @@ def _sampled(model, displacement, at, unload, settings, inner):
     U = _clip(at, u0, u_max)
     if unload:
         U = jnp.concatenate([U, _clip(at[::-1], u_end, u_max)])
-    X, iterations, residual = _resolve(model, rec["X"], U, settings, inner)
-    converged = rec["hit"] & (residual <= settings.atol) & jnp.all(jnp.isfinite(X), axis=1)
-    stable = (rec["SA"] == sign_ref) & (rec["SB"] == sign_ref)
+    X, iterations, residual = _resolve(model, rec.X, U, settings, inner)
+    converged = rec.hit & (residual <= settings.atol) & jnp.all(jnp.isfinite(X), axis=1)
+    stable = (rec.SA == sign_ref) & (rec.SB == sign_ref)
     result = RESULTS.where((result == RESULTS.successful) & ~jnp.all(converged),
-                           RESULTS.where(jnp.all(rec["hit"]), RESULTS.max_iterations, RESULTS.not_reached), result)
+                           RESULTS.where(jnp.all(rec.hit), RESULTS.max_iterations, RESULTS.not_reached), result)
     observed = observe(model, X, model.network.loads)
     return U, X, iterations, converged, stable, result, observed, u0
 

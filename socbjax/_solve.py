@@ -22,7 +22,7 @@ import optimistix as optx
 from jax.flatten_util import ravel_pytree
 
 from ._adjoint import ImplicitAdjoint
-from ._equilibrium import Solution
+from ._equilibrium import Solution, node_stiffness
 from ._jointed import JointedModel
 from ._network import Network, is_traced
 from ._path import LOAD_RAMP, NoRecorder, PathProblem, PathSettings, follow_path, position_weights, start_path
@@ -140,7 +140,7 @@ def _package(model, x, stats, state0) -> Solution:
     state = ravel_pytree(state0)[1](x)
     result, load_factor, steps, cutbacks, iterations, residual_norm = stats
     tangents, moments = model.tangents(state), model.node_moments(state)
-    EI = _node_EI(net)
+    EI = node_stiffness(net)
     if net.dim == 2:
         angles = state.directors if isinstance(model, SOCBModel) else jnp.arctan2(tangents[:, 1], tangents[:, 0])
         curvatures = moments / EI
@@ -153,13 +153,6 @@ def _package(model, x, stats, state0) -> Solution:
                     segment_forces=state.forces, reactions=reactions, result=result, iterations=iterations, steps=steps,
                     cutbacks=cutbacks, residual_norm=residual_norm, load_factor=load_factor, state=state, network=net,
                     model=model.name)
-
-
-def _node_EI(network: Network):
-    seg = np.concatenate([network.segments[:, 0], network.segments[:, 1]])
-    total = jax.ops.segment_sum(jnp.concatenate([network.EI, network.EI]), seg, network.n_nodes)
-    count = np.bincount(seg, minlength=network.n_nodes)
-    return total / np.maximum(count, 1)
 
 
 @eqx.filter_jit

@@ -110,7 +110,8 @@ def _add_plot(sub) -> None:
 def _parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(
         prog="socbjax",
-        description="SOCB simulator of slender elastic filaments (units: µm, pN, s; EI in pN·µm²).",
+        description="SOCB simulator of slender elastic filaments (units: µm, pN, s; EI in pN·µm²). Compiled "
+        "programs are cached in ~/.cache/socbjax/jax (set SOCBJAX_CACHE_DIR to another folder, or to off).",
     )
     sub = parser.add_subparsers(dest="command", required=True)
     _add_demo(sub)
@@ -214,6 +215,9 @@ def _plot(args) -> int:
 
 def main(argv: list[str] | None = None) -> int:
     args = _parser().parse_args(argv)
+    from ._cache import enable_compilation_cache
+
+    enable_compilation_cache()  # a second run of the same network does not recompile ($SOCBJAX_CACHE_DIR, "off")
     if args.command == "demo":
         from ._demo import run_demo
 

@@ -171,3 +171,21 @@ def test_unit_mesh_in_3d_equals_the_planar_mesh():
     F3 = np.interp(u, spatial.displacement[spatial.phase == 1], spatial.force[spatial.phase == 1])
     np.testing.assert_allclose(F3, F2, rtol=2e-3)
     np.testing.assert_allclose(spatial.positions[-1][:, 1], 0.0, atol=1e-7)  # stays in its plane
+
+
+def test_any_step_is_a_solution_with_its_smooth_curve():
+    """result.solution(i): the step as a Solution, its smooth curve through the step's nodes
+    and its support reactions balancing the probe force along the axis."""
+    result = sj.compress(sj.column(5, supports=("pinned", "pinned"), dim=2), 0.2)
+    k = result.n_steps - 1
+    sol = result.solution(k)
+    assert bool(sol.converged)
+    curve = sol.curve(12)
+    np.testing.assert_allclose(np.asarray(curve.positions[:, 0]), np.asarray(result.positions[k][:-1]), atol=1e-14)
+    np.testing.assert_allclose(np.asarray(curve.positions[:, -1]), np.asarray(result.positions[k][1:]), atol=1e-8)
+    axis = np.asarray(result.network.probe_direction)
+    probe = np.flatnonzero(result.network.probe)[0]
+    assert float(np.asarray(sol.reactions[probe]) @ axis) == pytest.approx(float(result.force[k]), rel=1e-10)
+    # pinned–pinned: the buckled column's lateral deflection follows the elastica's own shape
+    shape = _reference.elastica_column_shape(float(result.displacement[k]), supports=("pinned", "pinned"))
+    assert float(sol.max_deflection()) == pytest.approx(float(np.max(np.abs(np.asarray(shape.positions)[:, 1]))), rel=2e-3)

@@ -38,7 +38,8 @@ def follow(method):
     state = sj.follow_path(problem, sj.start_path(x0, 0.0, settings, recorder), settings, sj.DenseLU(), recorder)
     k = int(state.steps)
     rec = state.recorder
-    return state, np.asarray(rec["X"][:k, 0]), np.asarray(rec["P"][:k]), np.asarray(rec["SIGN"][:k])
+    rows = rec.rows(k)
+    return state, rows["X"][:, 0], rows["P"], rows["SIGN"]
 
 
 def test_natural_parameter_stops_at_the_fold():

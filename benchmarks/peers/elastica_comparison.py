@@ -13,7 +13,7 @@ Quantity: the tip displacement u = r_tip - (L, 0); error = |u - u_exact| / |u_ex
 same definition for every tool).  Exact answers: the inextensible, unshearable elastica
 solved here in closed form with elliptic integrals (scipy.special.ellipk/ellipkinc/ellipe/
 ellipeinc, k from scipy.optimize.brentq), independently of socbjax, then cross-checked
-against ``socbjax._reference`` (diffrax shooting) and, for the cantilever, the numpy RK4
+against ``socbjax.testing`` (diffrax shooting) and, for the cantilever, the numpy RK4
 shooting of ``benchmarks/_common.py``.
 
 Tools (all on this machine, in this one process):
@@ -155,11 +155,11 @@ def exact_tip(force, length: float = LENGTH, EI_: float = EI) -> dict:
 
 
 def cross_check(name: str, force, ex: dict) -> dict:
-    """Compare the elliptic-integral tip with socbjax._reference (and numpy shooting)."""
+    """Compare the elliptic-integral tip with socbjax.testing (and numpy shooting)."""
     out = {"socbjax_reference_max_abs_diff": None, "numpy_shooting_max_abs_diff": None}
     try:
         import socbjax  # noqa: F401  (enables float64)
-        from socbjax._reference import elastica_cantilever
+        from socbjax.testing import elastica_cantilever
 
         guess = None if name == "cantilever" else ex["base_moment"]  # branch selection only
         ref = elastica_cantilever(tuple(force), length=LENGTH, EI=EI, base_moment_guess=guess)
@@ -371,7 +371,7 @@ def main(argv=None) -> int:
         exact[name] = ex
         cc = ex["crosscheck"]
         print(f"exact elastica, {name} ({prob['description']}): tip = ({ex['tip'][0]:.12f}, {ex['tip'][1]:.12f}), "
-              f"|u| = {np.linalg.norm(ex['displacement']):.6f}; |elliptic - socbjax._reference| = "
+              f"|u| = {np.linalg.norm(ex['displacement']):.6f}; |elliptic - socbjax.testing| = "
               f"{C.fmt(cc['socbjax_reference_max_abs_diff'], '.1e')}"
               + (f", |elliptic - numpy shooting| = {C.fmt(cc['numpy_shooting_max_abs_diff'], '.1e')}"
                  if name == "cantilever" else ""))
