@@ -232,17 +232,22 @@ def _factor_solve(vals, rhs, *, indices, indptr, n, transpose, permc_spec):
     return X, float(sign)
 
 
-def _splu_host(vals, rhs, **kw):
+def _splu_host(vals, rhs, active, **kw):
     """Host side of the sparse solve, batched: vals [..., nnz] (size-1 leading axes where
-    unbatched) and rhs [..., n] broadcast against each other; every distinct value set is
-    factored once.  Returns (X like the broadcast rhs, sign [...])."""
+    unbatched), rhs [..., n] and the flags ``active`` [...] broadcast against each other;
+    every distinct value set with an active right-hand side is factored once (inactive
+    members — solves whose result a vmapped ``lax.cond`` discards — get zeros and sign 0).
+    Returns (X like the broadcast rhs, sign [...])."""
     vals, rhs = np.asarray(vals), np.asarray(rhs)
-    lead = np.broadcast_shapes(vals.shape[:-1], rhs.shape[:-1])
+    lead = np.broadcast_shapes(vals.shape[:-1], rhs.shape[:-1], np.shape(active))
     vals = vals.reshape((1,) * (len(lead) - vals.ndim + 1) + vals.shape)
     rhs = np.broadcast_to(rhs, lead + rhs.shape[-1:])
-    X, signs = np.empty(rhs.shape, rhs.dtype), np.empty(lead, rhs.dtype)
+    active = np.broadcast_to(np.asarray(active, bool), lead)
+    X, signs = np.zeros(rhs.shape, rhs.dtype), np.zeros(lead, rhs.dtype)
     for index in np.ndindex(vals.shape[:-1]):
         where = tuple(slice(None) if vals.shape[k] == 1 else i for k, i in enumerate(index))
+        if not active[where].any():
+            continue
         block = rhs[where]
         x, sign = _factor_solve(vals[index], block.reshape(-1, block.shape[-1]), **kw)
         X[where], signs[where] = x.reshape(block.shape), sign
@@ -304,7 +309,9 @@ class ColouredSparseLU(_SeededSolver):
         host = functools.partial(_splu_host, indices=self.rows.a, indptr=self.indptr.a, n=self.n,
                                  transpose=bool(transpose.value), permc_spec=self.permc_spec)
         out = (jax.ShapeDtypeStruct(vector.shape, dtype), jax.ShapeDtypeStruct((), dtype))
-        x, sign = jax.pure_callback(host, out, values.astype(dtype), vector.astype(dtype), vmap_method="expand_dims")
+        active = jnp.asarray(options.get("active", True), bool)  # see DampedNewton.step
+        x, sign = jax.pure_callback(host, out, values.astype(dtype), vector.astype(dtype), active,
+                                    vmap_method="expand_dims")
         return x, lx.RESULTS.successful, {"sign": sign}
 
     def transpose(self, state, options):

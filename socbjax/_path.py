@@ -137,8 +137,8 @@ class PathSettings(eqx.Module):
     def traced(self) -> PathSettings:
         """The numeric fields as arrays: ``eqx.filter_jit`` traces arrays but holds Python
         numbers static, so new step sizes or tolerances would otherwise recompile."""
-        def leaf(v):
-            return v if isinstance(v, bool) or v is None else jnp.asarray(v)
+        def leaf(v):  # numpy for concrete numbers: traced by filter_jit, no device dispatch here
+            return v if isinstance(v, (bool, jax.Array)) or v is None else np.asarray(v)
 
         return jax.tree_util.tree_map(leaf, self)
 

@@ -130,16 +130,21 @@ class DampedNewton(optx.AbstractRootFinder):
         converged = finite & (norm <= self.atol)
         accepted = converged | (finite & (first | (merit <= (1.0 - self.armijo * state.alpha) * state.merit)))
 
+        # A converged point reuses the factorisation of the last Newton step (its sign and
+        # tangent describe the converged neighbourhood); only a start that is already
+        # converged is factored itself, so every solve reports them.
+        factors = accepted & (~converged | first)
+        # Under vmap the cond below runs both branches for every member; "active" lets
+        # host-side solvers (ColouredSparseLU) skip the factorisations that are discarded.
+        linear_options = {**options.get("linear", {}), "active": factors}
+
         def factor(_):
-            return self._direction(lin, f, y, options.get("linear", {}), state.stats, tags)
+            return self._direction(lin, f, y, linear_options, state.stats, tags)
 
         def keep(_):
             return state.direction, state.stats
 
-        # A converged point reuses the factorisation of the last Newton step (its sign and
-        # tangent describe the converged neighbourhood); only a start that is already
-        # converged is factored itself, so every solve reports them.
-        direction, stats = jax.lax.cond(accepted & (~converged | first), factor, keep, None)
+        direction, stats = jax.lax.cond(factors, factor, keep, None)
         bad_direction = accepted & ~converged & ~jnp.all(jnp.isfinite(direction))
         iterations = state.iterations + jnp.where(accepted & ~first, 1, 0)
         backtracks = jnp.where(accepted, 0, state.backtracks + 1)

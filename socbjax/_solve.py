@@ -59,26 +59,34 @@ def _node_key(key, n: int, what: str) -> int:
 
 
 def _nodal(values, shape: tuple, what: str, unit: str, dim: int):
-    """A {node: value} mapping or an array of ``shape`` as a jax array (traced values kept)."""
+    """A {node: value} mapping or an array of ``shape``: a numpy array for concrete values
+    (no device dispatch on the host path of a solve), a jax array where any is traced."""
     n = shape[0]
     width = shape[1:]
     if values is None:
-        return jnp.zeros(shape)
+        return np.zeros(shape)
+    entries = values.values() if isinstance(values, Mapping) else [values]
+    xp = jnp if any(is_traced(v) or isinstance(v, jax.Array) for v in entries) else np
     if isinstance(values, Mapping):
-        out = jnp.zeros(shape)
+        out = xp.zeros(shape)
         for key, vec in values.items():
             node = _node_key(key, n, what)
-            v = jnp.asarray(vec, jnp.float64)
+            v = xp.asarray(vec, np.float64)
             if v.size != int(np.prod(width, dtype=int)) or (v.ndim > 1 if width else v.ndim > 0):
                 expected = "a scalar" if not width else f"{width[0]} components"
                 raise ValueError(f"{what} on node {key} must be {expected} (dim={dim}), got shape {np.shape(vec)}")
-            out = out.at[node].add(v.reshape(width))
+            out = out.at[node].add(v.reshape(width)) if xp is jnp else _add_at(out, node, v.reshape(width))
     else:
-        out = jnp.asarray(values, jnp.float64)
+        out = xp.asarray(values, np.float64)
         if out.shape != shape:
             raise ValueError(f"{what} array must have shape {shape} ({unit}), got {out.shape}")
     if not is_traced(out) and not bool(np.all(np.isfinite(np.asarray(out)))):
         raise ValueError(f"{what} contain NaN or infinite values; give finite {unit}")
+    return out
+
+
+def _add_at(out: np.ndarray, node: int, value: np.ndarray) -> np.ndarray:
+    out[node] += value
     return out
 
 
@@ -100,10 +108,12 @@ def default_atol(network: Network, atol: float = 1e-12):
     ε max|r| / ℓ (ε = 2.2e-16): 1.2e-12 measured for a 10 µm, 10,000-segment chain at its
     exact straight state.  The floor used is 16 ε max|r| / min ℓ (the 16 covers the few
     additions per row), e.g. 3.6e-11 for that chain and below 1e-12 up to ~300 segments.
-    A JAX scalar (traced with the network's positions and lengths)."""
-    min_length = jnp.min(network.lengths)
-    scale = jnp.maximum(jnp.max(jnp.abs(network.positions)), min_length)
-    return jax.lax.stop_gradient(jnp.maximum(atol, 16 * jnp.finfo(jnp.float64).eps * scale / min_length))
+    A float for concrete networks, a JAX scalar where positions or lengths are traced."""
+    xp = jnp if is_traced(network.positions, network.lengths) else np  # concrete: no device dispatch
+    min_length = xp.min(network.lengths)
+    scale = xp.maximum(xp.max(xp.abs(network.positions)), min_length)
+    floor = xp.maximum(atol, 16 * np.finfo(np.float64).eps * scale / min_length)
+    return jax.lax.stop_gradient(floor) if xp is jnp else floor
 
 
 def implicit_adjoint(adjoint, inner) -> ImplicitAdjoint:
@@ -157,6 +167,7 @@ def _package(model, x, stats, state0) -> Solution:
 
 @eqx.filter_jit
 def _solve(model, state0, settings, inner, adjoint):
+    state0 = model.initial_state() if state0 is None else state0
     x, stats = adjoint.apply(_ramp_primal, _ramp_rewrite, (model, state0, settings, inner), tags=frozenset())
     return _package(model, x, stats, state0)
 
@@ -205,11 +216,11 @@ def solve(network: Network, forces=None, couples=None, *, model: str = "socb", s
                              couples=network.couples + nodal_couples(network, couples))
     disc = make_model(loaded, model, quadrature_order=settings.quadrature_order)
     inner = linear_solver_for(disc, settings.linear_solver)
-    state0 = disc.initial_state() if initial_state is None else initial_state
-    if jax.tree_util.tree_structure(state0) != jax.tree_util.tree_structure(disc.initial_state()):
+    if initial_state is not None and (jax.tree_util.tree_structure(initial_state)
+                                      != jax.tree_util.tree_structure(disc.initial_state())):
         raise TypeError(f"initial_state must be a state of the {model} model of this network "
                         f"(e.g. an earlier Solution.state), got {type(initial_state).__name__}")
-    solution = _solve(disc, state0, settings.traced(), inner, implicit_adjoint(adjoint, inner))
+    solution = _solve(disc, initial_state, settings.traced(), inner, implicit_adjoint(adjoint, inner))
     if throw:
         return _check(solution, settings, network)
     return solution

@@ -101,13 +101,16 @@ def prepare_sparse_solver(model) -> ColouredSparseLU:
     key = (model.network.topology, type(model).__name__, getattr(model, "quad", None))
     if key in _PREPARED:
         return _PREPARED[key]
-    template = template_model(model)
-    x0, fn = _residual_fn(template)
-    if isinstance(model, SOCBModel):
-        solver = _refined(template, x0, fn)
-    else:
-        rows, cols = sparsity_pattern(lambda y: fn(y, 0.5), x0)
-        solver = ColouredSparseLU.from_pattern(rows, cols, x0.size)
+    # Host-side set-up from random template values, also when called while the user's
+    # function is being traced (jit of a solve): evaluate eagerly, never stage.
+    with jax.ensure_compile_time_eval():
+        template = template_model(model)
+        x0, fn = _residual_fn(template)
+        if isinstance(model, SOCBModel):
+            solver = _refined(template, x0, fn)
+        else:
+            rows, cols = sparsity_pattern(lambda y: fn(y, 0.5), x0)
+            solver = ColouredSparseLU.from_pattern(rows, cols, x0.size)
     _PREPARED[key] = solver
     return solver
 

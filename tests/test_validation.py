@@ -144,3 +144,11 @@ def test_quadrature_order_is_configurable_and_converged_at_default():
     }
     assert errors[2] > 10 * errors[8]  # too few points: quadrature error dominates
     assert abs(errors[12] - errors[8]) < 1e-3 * errors[8]  # order 8 is converged: discretisation error remains
+
+
+def test_buckling_load_reports_its_status_and_refuses_networks_that_are_not_columns():
+    P, result = sj.buckling_load(sj.column(4, supports=("pinned", "pinned"), dim=2), throw=False)
+    assert result == sj.RESULTS.successful
+    assert abs(P - np.pi**2) / np.pi**2 < 5e-4
+    with pytest.raises(ValueError, match="straight column"):
+        sj.buckling_load(sj.dendritic_outcrop(generations=2))
