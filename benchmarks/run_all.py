@@ -2,8 +2,8 @@
 measured from a cold start and one crash does not stop the others).
 
 Run:  PYTHONPATH=. python benchmarks/run_all.py [--quick] [--out DIR] [--only NAME ...]
-Exit status is non-zero if any benchmark fails (non-zero exit or a timeout).  The test
-suite calls ``main(["--quick", "--out", tmpdir])`` as a smoke test.
+Exit status is non-zero if any benchmark fails (non-zero exit or a timeout).  ``pytest -m slow``
+runs ``run_all.py --quick`` as a smoke test (in its own process group, killed on timeout).
 """
 
 from __future__ import annotations
@@ -27,6 +27,7 @@ SCRIPTS = [
     "outcrop_compression",
     "ensemble_throughput",
     "gradient_cost",
+    "solve_gradient_cost",
     "fit_recovery",
     "peers/elastica_comparison",  # PyElastica columns only with the extra socbjax[peers]
 ]

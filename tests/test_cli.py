@@ -4,6 +4,8 @@ import json
 import subprocess
 import sys
 
+import pytest
+
 import socbjax.cli
 
 
@@ -15,6 +17,7 @@ def test_help_lists_the_demo(capsys):
     assert "demo" in capsys.readouterr().out
 
 
+@pytest.mark.slow
 def test_demo_quick_writes_table_and_figure(tmp_path):
     assert socbjax.cli.main(["demo", "--quick", "--out", str(tmp_path)]) == 0
     report = json.loads((tmp_path / "demo.json").read_text())

@@ -165,6 +165,7 @@ _SHARDED = textwrap.dedent("""
 """)
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("solver", ["dense", "sparse"])
 def test_sharded_over_two_host_devices_equals_unsharded(solver):
     """The batch split over 2 host devices (jax.shard_map) gives the unsharded numbers; the

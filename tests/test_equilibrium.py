@@ -50,7 +50,7 @@ def test_max_deflection_end_rotation_and_reactions(cantilever_p2):
     assert float(np.abs(np.asarray(sol.reaction_moments[1:])).max()) == 0.0
 
 
-@pytest.mark.parametrize("dim, nodes", [(2, 3), (3, 5)])
+@pytest.mark.parametrize("dim, nodes", [(2, 3), pytest.param(3, 5, marks=pytest.mark.slow)])
 def test_tip_couple_of_2pi_rolls_a_cantilever_into_a_closed_circle(dim, nodes):
     """A pure end couple gives constant curvature M/EI: M = 2π EI/L closes the circle, with
     the tip back at the clamp.  (3D: under a fixed-direction couple sign(det J) changes along

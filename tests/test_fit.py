@@ -27,8 +27,7 @@ def unit_mesh():
     return UnitMeshModel(dim=2)
 
 
-@pytest.mark.slow
-@pytest.mark.parametrize("seed", [0, 1])
+@pytest.mark.parametrize("seed", [0, pytest.param(1, marks=pytest.mark.slow)])
 def test_recovers_EI_and_branch_angle_from_noisy_curves(unit_mesh, seed):
     """2 % noise; start 50 % off in EI and 15° off in angle; EI within 2 %, angle within 1°,
     and the Gauss–Newton standard errors cover the truth (within 3 σ)."""
@@ -60,6 +59,7 @@ def test_recovers_contact_offset_and_baseline_on_a_column():
     assert result.correlation.shape == (3, 3) and np.allclose(np.diag(result.correlation), 1.0)
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("optimizer", ["adam", "lbfgs"])
 def test_optax_optimisers_reach_the_least_squares_EI(optimizer):
     """One parameter: the least-squares EI of a noisy curve is known in closed form because the
@@ -91,6 +91,7 @@ def test_EI_and_force_scale_are_refused_together():
     assert problem.free == ("EI_mother", "force_scale")
 
 
+@pytest.mark.slow
 def test_correlated_parameters_are_reported_not_identifiable():
     """Contact offset and EI on a flat post-buckling plateau: shifting the contact point and
     changing EI are nearly the same change of the curve → flagged, with a warning."""
@@ -140,6 +141,7 @@ def test_bad_input_is_refused_with_clear_messages():
         UnitMeshModel(dim=2).network({"EI_gen3": 1.0})
 
 
+@pytest.mark.slow
 def test_unloading_branch_fit():
     """The retract/unloading branch: a reversible column curve gives the same EI."""
     model = ColumnModel(4, supports=("pinned", "pinned"))

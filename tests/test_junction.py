@@ -34,7 +34,7 @@ def branched_cantilever(dim, *, n_mother=4, mother_length=1.0, branch_node=1, an
     return net, J, base
 
 
-@pytest.mark.parametrize("dim", [2, 3])
+@pytest.mark.parametrize("dim", [2, pytest.param(3, marks=pytest.mark.slow)])
 def test_unloaded_daughter_leaves_the_mother_unchanged(dim):
     force = np.zeros(dim)
     force[1] = -2.0
@@ -52,7 +52,7 @@ def test_unloaded_daughter_leaves_the_mother_unchanged(dim):
     np.testing.assert_allclose(branched.segment_forces[3:], 0.0, atol=1e-10)
 
 
-@pytest.mark.parametrize("dim", [2, 3])
+@pytest.mark.parametrize("dim", [2, pytest.param(3, marks=pytest.mark.slow)])
 def test_junction_system_is_square(dim):
     net, _, _ = branched_cantilever(dim)
     model = sj.make_model(net)
@@ -64,7 +64,7 @@ def test_junction_system_is_square(dim):
     assert np.linalg.matrix_rank(jac) == x.size  # no zero modes: the azimuth is fixed
 
 
-@pytest.mark.parametrize("dim", [2, 3])
+@pytest.mark.parametrize("dim", [2, pytest.param(3, marks=pytest.mark.slow)])
 @pytest.mark.parametrize("kink_deg", [30.0, -50.0])
 def test_kinked_cantilever_matches_the_elastica_with_a_corner(dim, kink_deg):
     L1, L2, EI = 1.0, 0.6, 1.0

@@ -47,6 +47,7 @@ def test_sampled_column_follows_the_closed_form_and_its_slope():
     np.testing.assert_allclose(slope, exact, rtol=3e-3)
 
 
+@pytest.mark.slow
 def test_grad_jacfwd_vmap_and_jit_agree():
     model = ColumnModel(4, supports=("clamped", "free"))
     at = jnp.array([0.1, 0.2])
@@ -86,8 +87,7 @@ def _outcrop_loss(weights, at):
     return loss, np.linspace(0.05, 0.09, len(names))
 
 
-@pytest.mark.slow
-@pytest.mark.parametrize("case", ["unit_mesh", "outcrop"])
+@pytest.mark.parametrize("case", [pytest.param("unit_mesh", marks=pytest.mark.slow), "outcrop"])
 def test_implicit_gradients_match_finite_differences(case):
     """Gradient of a weighted sum of sampled forces — before buckling, at the drop and far
     past it — against central differences of the whole pipeline, 1e-6 relative."""
@@ -150,6 +150,7 @@ def test_traced_displacement_is_allowed():
     assert float(f(0.2)) == pytest.approx(float(f(0.3)), rel=1e-9)  # the sample does not depend on the range
 
 
+@pytest.mark.slow
 def test_gradient_with_respect_to_applied_loads():
     """Network loads are differentiable: a lateral load on the middle of a pinned column,
     implicit derivative of the sampled forces against central differences."""

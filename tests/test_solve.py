@@ -86,6 +86,7 @@ def test_below_buckling_perfect_column_stays_straight():
 
 
 # ----------------------------------------------------------------- sparse Jacobian solver
+@pytest.mark.slow
 def test_sparse_and_dense_agree_on_a_branched_3d_network():
     net = sj.dendritic_outcrop(generations=3, gap=30.0, dim=3, seed=2)  # root clamped, tips free
     rng = np.random.default_rng(0)
@@ -122,13 +123,13 @@ def test_default_atol():
     assert 2e-11 < floor < 5e-11  # 16 ε · 10 µm / 1 nm
 
 
+@pytest.mark.slow
 def test_too_tight_tolerance_on_a_long_chain_names_the_round_off_floor():
     net = sj.cantilever(n_nodes=3001, length=10.0, dim=2)
     with pytest.raises(sj.ConvergenceError, match="round-off floor"):
         sj.solve(net, {-1: [0.0, 0.02]}, settings=sj.PathSettings(atol=1e-14, linear_solver="sparse"))
 
 
-@pytest.mark.slow
 def test_gradients_of_a_1000_segment_chain_with_the_sparse_solver():
     """d(tip)/d(EI) and d(tip)/d(P) of a 1,000-segment cantilever (6,004 unknowns) through the
     coloured sparse Jacobian + SuperLU (transposed solve for reverse mode), under jit: equal

@@ -91,6 +91,7 @@ def test_sampled_compression_under_jit_grad_jacfwd_vmap():
     np.testing.assert_allclose(jax.vmap(_sampled_force)(jnp.array([EI, 2 * EI])), np.stack([F, 2 * F]), rtol=1e-8)
 
 
+@pytest.mark.slow
 def test_sampled_ensemble_under_jit_grad_jacfwd_vmap():
     nets = [sj.column(4, supports=("pinned", "pinned"), dim=2, EI=EI) for EI in (0.05, 0.1)]
 

@@ -103,7 +103,7 @@ def test_buckling_three_nodes_clamped_free():
     assert abs(P - np.pi**2 / 4) / (np.pi**2 / 4) < 1e-4
 
 
-@pytest.mark.parametrize("dim", [2, 3])
+@pytest.mark.parametrize("dim", [2, pytest.param(3, marks=pytest.mark.slow)])
 @pytest.mark.parametrize("supports", list(EULER))
 def test_buckling_all_supports_five_nodes(supports, dim):
     P = sj.buckling_load(sj.column(5, supports=supports, dim=dim))
