@@ -101,6 +101,7 @@ def test_column_members_follow_the_elastica():
         assert F.min() > np.pi**2 * EI / L**2 * (1 - 1e-3)  # at or above the Euler load
 
 
+@pytest.mark.slow
 def test_progress_runs_in_chunks_with_the_same_curves(capsys):
     nets = [sj.column(5, supports=("pinned", "pinned"), dim=2, EI=EI) for EI in (0.05, 0.1)]
     plain = sj.compress_ensemble(nets, 0.2)

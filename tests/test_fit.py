@@ -43,6 +43,7 @@ def test_recovers_EI_and_branch_angle_from_noisy_curves(unit_mesh, seed):
     assert result.history[0]["loss"] > result.loss
 
 
+@pytest.mark.slow
 def test_recovers_contact_offset_and_baseline_on_a_column():
     """An imperfect column (lateral force 0.2 pN, 14 % of its Euler load) stiffens smoothly
     from contact, so the contact point is determined by the data."""
@@ -102,6 +103,7 @@ def test_correlated_parameters_are_reported_not_identifiable():
     assert not result.identifiable and any("correlated" in w for w in result.warnings)
 
 
+@pytest.mark.slow
 def test_fit_result_json_round_trip(tmp_path):
     model = ColumnModel(3, supports=("pinned", "pinned"))
     c = np.linspace(0.02, 0.2, 6)

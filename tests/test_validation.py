@@ -86,6 +86,7 @@ def test_socb_convergence_order():
     assert 5.5 < order < 6.5, (order, errors)  # sixth order in the segment length
 
 
+@pytest.mark.slow
 def test_jointed_converges_to_the_same_answer_at_second_order():
     exact = exact_tip_displacement(0.0, 2.0)
     ns = [5, 10, 20, 40]
