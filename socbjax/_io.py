@@ -167,7 +167,6 @@ def atomic_path(path, write) -> Path:
 def _atomic_write(path, fill, fmt: str) -> Path:
     """Atomically write an HDF5 file stamped with ``fmt`` and filled by ``fill(file)``."""
 
-
     def write(tmp_path: Path) -> None:
         with h5py.File(tmp_path, "w") as f:
             f.attrs["format"] = fmt
@@ -181,8 +180,6 @@ def _atomic_write(path, fill, fmt: str) -> Path:
 
 def _open(path, fmt: str) -> h5py.File:
     """Open a socbjax file for reading after checking ``format`` and ``format_version``."""
-
-
     path = Path(path).expanduser()
     if not path.exists():
         raise FileNotFoundError(errno.ENOENT, "no such file", str(path))
