@@ -51,15 +51,16 @@ from typing import Any, Literal
 
 import numpy as np
 
+from ._curve_files import (
+    NATIVE_SUFFIXES,
+    check_finite,
+    is_native,
+    read_afmformats,
+    read_native,
+)
+
 __all__ = ["ForceCurve", "load_curve", "save_curve"]
 
-_LENGTH = {"m": 1e6, "mm": 1e3, "um": 1.0, "µm": 1.0, "μm": 1.0, "nm": 1e-3}  # → µm
-_FORCE = {"n": 1e12, "un": 1e6, "µn": 1e6, "μn": 1e6, "nn": 1e3, "pn": 1.0}  # → pN
-_QUANTITIES = {"compression": _LENGTH, "tip_position": _LENGTH, "height": _LENGTH, "force": _FORCE}
-_ACCEPTED = ("compression_um|nm|m, force_pN|nN|N, tip_position_um|nm|m, height_um|nm|m "
-             "(also µm, mm, µN; case-insensitive) and optional segment")
-_NATIVE_SUFFIXES = (".csv", ".tsv", ".dat")
-_SEGMENT_NAMES = {"0": 0, "1": 1, "approach": 0, "retract": 1, "false": 0, "true": 1}
 _BASELINE_FRACTION = 0.5  # far part of the approach travel used for the baseline
 _MAX_BACKWARD = 0.25  # compression files: largest fraction of backward steps
 _SPLIT_RETURN = 0.1  # return travel (fraction) that marks an unlabelled retract
@@ -95,7 +96,7 @@ class ForceCurve:
         if any(a.ndim != 1 for a in cols.values()) or len({len(a) for a in cols.values()}) > 1:
             shapes = ", ".join(f"{k} {a.shape}" for k, a in cols.items())
             raise ValueError(f"ForceCurve columns must be 1-D of equal length, got {shapes}")
-        _check_finite({"compression": comp, "force": force}, "ForceCurve")
+        check_finite({"compression": comp, "force": force}, "ForceCurve")
         if len(comp) < 3:
             raise ValueError(f"a ForceCurve needs at least 3 points, got {len(comp)}")
         if not np.isin(seg, (0, 1)).all():
@@ -161,17 +162,6 @@ class ForceCurve:
                                              "bin_counts": counts.tolist()})
 
 
-def _check_finite(columns: Mapping[str, np.ndarray], where: str) -> None:
-    """Raise ValueError naming how many NaN/inf values each column has, and their rows."""
-    bad = {k: np.flatnonzero(~np.isfinite(v)) for k, v in columns.items()}
-    bad = {k: v for k, v in bad.items() if v.size}
-    if bad:
-        parts = [f"{v.size} in {k} (rows {', '.join(map(str, v[:5]))}{', ...' if v.size > 5 else ''})"
-                 for k, v in bad.items()]
-        raise ValueError(f"{where}: {sum(v.size for v in bad.values())} NaN/infinite values: "
-                         f"{'; '.join(parts)}; remove or fill those rows")
-
-
 def _spring(k: Any, source: str) -> float:
     """A validated spring constant (N/m)."""
     try:
@@ -181,110 +171,6 @@ def _spring(k: Any, source: str) -> float:
     if not (math.isfinite(k) and k > 0):
         raise ValueError(f"spring constant from {source} must be positive and finite (N/m), got {k}")
     return k
-
-
-# ---------------------------------------------------------------- native text files
-def _classify(name: str) -> tuple[str, float] | None:
-    """``(quantity, scale to µm or pN)`` of a header name; None for an ignored column."""
-    low = name.strip().lower()
-    if low == "segment":
-        return "segment", 1.0
-    for quantity, units in _QUANTITIES.items():
-        if low == quantity:
-            raise ValueError(f"column {name!r} has no unit suffix; accepted names: {_ACCEPTED}")
-        if low.startswith(quantity + "_"):
-            unit = low[len(quantity) + 1:]
-            if unit not in units:
-                raise ValueError(f"column {name!r}: unknown unit {unit!r}; accepted names: {_ACCEPTED}")
-            return quantity, units[unit]
-    return None
-
-
-def _parse_column(table: list[tuple[int, list[str]]], j: int, name: str, path: Path) -> np.ndarray:
-    """Column ``j`` of the split rows in µm/pN (segment: int8 0/1)."""
-    q, scale = _classify(name)
-    out = np.empty(len(table), np.int8 if q == "segment" else float)
-    for i, (lineno, toks) in enumerate(table):
-        try:
-            out[i] = _SEGMENT_NAMES[toks[j].lower()] if q == "segment" else float(toks[j])
-        except (KeyError, ValueError):
-            hint = " (use 0/1 or approach/retract)" if q == "segment" else ""
-            raise ValueError(f"{path}: line {lineno}: cannot read {toks[j]!r} in column {name!r}{hint}") from None
-    return out if q == "segment" else out * scale
-
-
-def _read_native(path: Path, columns: Mapping[str, str] | None) -> dict[str, np.ndarray]:
-    """Read a native file into ``{quantity: array in µm/pN, "segment": int8 array}``."""
-    lines = [(i + 1, ln) for i, ln in enumerate(path.read_text(encoding="utf-8-sig").splitlines())
-             if ln.strip() and not ln.lstrip().startswith("#")]
-    if not lines:
-        raise ValueError(f"{path}: empty file (no header row); accepted column names: {_ACCEPTED}")
-    delim = next((d for d in ("\t", ";", ",") if d in lines[0][1]), None)
-    split = (lambda s: [t.strip() for t in s.split(delim)]) if delim else str.split
-    names = [(columns or {}).get(n, n) for n in split(lines[0][1])]
-    found = [kind[0] for kind in map(_classify, names) if kind]
-    if dup := sorted({q for q in found if found.count(q) > 1}):
-        raise ValueError(f"{path}: more than one {dup[0]} column in {names}; keep one")
-    if "force" not in found:
-        raise ValueError(f"{path}: missing force column (force_pN, force_nN or force_N) in {names}; "
-                         f"accepted names: {_ACCEPTED}")
-    if not {"compression", "tip_position", "height"} & set(found):
-        raise ValueError(f"{path}: missing position column: need compression_*, tip_position_* or "
-                         f"height_* (with spring_constant) in {names}; accepted names: {_ACCEPTED}")
-    table = [(n, split(line)) for n, line in lines[1:]]
-    if not table:
-        raise ValueError(f"{path}: no data rows below the header")
-    for lineno, toks in table:
-        if len(toks) != len(names):
-            raise ValueError(f"{path}: line {lineno} has {len(toks)} fields, the header has {len(names)}")
-    used = [(j, n, _classify(n)[0]) for j, n in enumerate(names) if _classify(n)]
-    data = {q: _parse_column(table, j, n, path) for j, n, q in used}
-    _check_finite({n: data[q] for _, n, q in used if q != "segment"}, str(path))
-    return data
-
-
-def _is_native(path: Path) -> bool:
-    """Native suffix, or a .txt file whose header row has a ``force_<unit>`` column."""
-    suffix = path.suffix.lower()
-    if suffix != ".txt":
-        return suffix in _NATIVE_SUFFIXES
-    with path.open(encoding="utf-8-sig", errors="replace") as fh:
-        header = next((ln for ln in fh if ln.strip() and not ln.lstrip().startswith("#")), "force_")
-    return "force_" in header.lower()
-
-
-# ---------------------------------------------------------------- afmformats files
-def _read_afmformats(path: Path, curve_index: int) -> tuple[dict[str, np.ndarray], dict[str, Any]]:
-    """Read curve ``curve_index`` with afmformats: ``(data in µm/pN, metadata)``."""
-    try:
-        import afmformats
-    except ImportError as exc:
-        raise ImportError(f"reading {path.suffix or 'extension-less'} files needs the optional extra: "
-                          "pip install 'socbjax[afm]' (afmformats); native files are .csv/.tsv/.dat/.txt"
-                          ) from exc
-    if path.suffix not in afmformats.supported_extensions:
-        raise ValueError(f"{path}: unsupported file type {path.suffix!r}; use a native .csv/.tsv/.dat/.txt "
-                         f"file or one of afmformats' {afmformats.supported_extensions}")
-    try:
-        curves = afmformats.load_data(path)
-    except Exception as exc:  # any reader failure means a file the caller must fix
-        raise ValueError(f"{path}: afmformats could not read it: {exc}") from exc
-    if not 0 <= curve_index < len(curves):
-        raise ValueError(f"{path}: curve_index {curve_index} out of range; the file has {len(curves)} curve(s)")
-    d = curves[curve_index]
-    cols = d.columns_innate
-    pos = next((c for c in ("tip position", "height (measured)", "height (piezo)") if c in cols), None)
-    if "force" not in cols or pos is None:
-        raise ValueError(f"{path}: needs force and height or tip position columns, has {cols}")
-    data = {"force": np.asarray(d["force"], float) * 1e12,
-            "tip_position" if pos == "tip position" else "height": np.asarray(d[pos], float) * 1e6}
-    if "segment" in cols:
-        data["segment"] = np.asarray(d["segment"]).astype(np.int8)
-    md = d.metadata
-    return data, {"format": str(md.get("format", "afmformats")), "curve_index": curve_index,
-                  "n_curves_in_file": len(curves), "position_column": pos,
-                  "file_spring_constant_N_per_m": md.get("spring constant"),
-                  "setpoint_N": md.get("setpoint"), "instrument": md.get("instrument")}
 
 
 # ---------------------------------------------------------------- preprocessing
@@ -385,13 +271,13 @@ def _check_options(segment: str, baseline: str | None, contact_point: float | st
 def _read(path: Path, columns: Mapping[str, str] | None, curve_index: int, k_arg: float | None
           ) -> tuple[dict[str, np.ndarray], dict[str, Any], float | None]:
     """Raw data (µm, pN), metadata and spring constant (N/m or None) of a file."""
-    native = _is_native(path)
+    native = is_native(path)
     if native:
-        data, meta = _read_native(path, columns), {"format": "socbjax native text"}
+        data, meta = read_native(path, columns), {"format": "socbjax native text"}
     elif columns:
         raise ValueError("columns= renames native CSV/TSV header columns; it does not apply to afmformats files")
     else:
-        data, meta = _read_afmformats(path, curve_index)
+        data, meta = read_afmformats(path, curve_index)
     if len(data["force"]) < 3:
         raise ValueError(f"{path}: {len(data['force'])} data point(s); a force curve needs at least 3")
     k_file = meta.get("file_spring_constant_N_per_m")
@@ -487,7 +373,7 @@ def save_curve(curve: ForceCurve, path: str | Path) -> Path:
     from ._io import atomic_path
 
     path = Path(path)
-    if path.suffix.lower() not in (*_NATIVE_SUFFIXES, ".txt"):
+    if path.suffix.lower() not in (*NATIVE_SUFFIXES, ".txt"):
         raise ValueError(f"save_curve writes CSV: give a path ending in .csv (got {path.name!r})")
     source = str(curve.metadata.get("source", "")).replace("\n", " ")
     rows = zip(curve.compression, curve.force, curve.segment, strict=True)

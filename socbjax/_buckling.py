@@ -53,6 +53,13 @@ def _check_column(network: Network) -> None:
         if np.linalg.norm(axis) < 1e-12:
             raise ValueError("buckling_load needs a straight column whose first and last nodes differ")
         axis = axis / np.linalg.norm(axis)
+        offset = (pos - pos[0]) - np.outer((pos - pos[0]) @ axis, axis)
+        tangents = np.asarray(network.tangents) if not is_traced(network.tangents) else None
+        if np.abs(offset).max() > 1e-9 * np.linalg.norm(pos[-1] - pos[0]) or (
+                tangents is not None and np.min(tangents @ axis) < 1.0 - 1e-9):
+            raise ValueError("buckling_load needs a straight column: every node on the line from the first to the last "
+                             "node and every tangent along it (a curved or kinked filament has no buckling load; "
+                             "follow it with socbjax.compress instead)")
         if np.linalg.norm(network.position_projector[-1] @ axis) > 1e-9:
             raise ValueError("the last node of the column is held along the column axis, so no axial load can act "
                              "there; support it laterally only (socbjax.column does)")

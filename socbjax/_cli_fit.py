@@ -47,11 +47,11 @@ def _pairs(text: str, what: str) -> dict:
     for item in filter(None, (t.strip() for t in text.split(","))):
         name, sep, value = item.partition("=")
         if not sep:
-            raise SystemExit(f"socbjax fit: {what} expects name=value pairs, got {item!r}")
+            raise ValueError(f"{what} expects name=value pairs, got {item!r}")
         try:
             out[name.strip()] = float(value)
         except ValueError:
-            raise SystemExit(f"socbjax fit: {what} value of {name.strip()!r} is not a number: {value!r}") from None
+            raise ValueError(f"{what} value of {name.strip()!r} is not a number: {value!r}") from None
     return out
 
 
@@ -60,7 +60,7 @@ def _model_options(items: list[str]) -> dict:
     for item in items:
         name, sep, value = item.partition("=")
         if not sep:
-            raise SystemExit(f"socbjax fit: --model-option expects NAME=VALUE, got {item!r}")
+            raise ValueError(f"--model-option expects NAME=VALUE, got {item!r}")
         name = name.strip()
         if name == "supports":
             out[name] = tuple(v.strip() for v in value.split("/"))
@@ -68,7 +68,7 @@ def _model_options(items: list[str]) -> dict:
         try:
             number = float(value)
         except ValueError:
-            raise SystemExit(f"socbjax fit: --model-option {name} needs a number, got {value!r}") from None
+            raise ValueError(f"--model-option {name} needs a number, got {value!r}") from None
         out[name] = int(number) if number.is_integer() and name in ("dim", "generations", "seed", "n_nodes") else number
     return out
 
@@ -77,10 +77,13 @@ def run_fit(args) -> int:
     import socbjax as sj
 
     from ._fit_figure import save_fit_figure
+    from ._io import check_output_path
 
-    out = Path(args.out)
-    if not out.parent.exists():
-        raise SystemExit(f"socbjax fit: the folder of --out does not exist: {out.parent}")
+    out = Path(args.out).expanduser()
+    check_output_path(out, "--out")  # before any work: a fit is not lost at the final save
+    check_output_path(out.with_suffix(".png"), "the figure next to --out")
+    fixed, initial = _pairs(args.fixed, "--fixed"), _pairs(args.initial, "--initial")
+    options = _model_options(args.model_option)
     curve = sj.load_curve(args.curve, spring_constant=args.spring_constant,
                           segment="approach" if args.branch == "loading" else "retract")
     if args.max_compression is not None:
@@ -89,10 +92,10 @@ def run_fit(args) -> int:
           f"force up to {curve.force.max():.4g} pN; model {args.model}, free {args.free}", file=sys.stderr)
     result = sj.fit(
         curve, args.model, free=tuple(n.strip() for n in args.free.split(",") if n.strip()),
-        fixed=_pairs(args.fixed, "--fixed"), initial=_pairs(args.initial, "--initial"),
+        fixed=fixed, initial=initial,
         settings=sj.FitSettings(branch=args.branch, optimizer=args.optimizer, max_iterations=args.max_iterations,
                                 max_points=args.max_points),
-        model_options=_model_options(args.model_option), progress=not args.quiet,
+        model_options=options, progress=not args.quiet,
     )
     figure = out.with_suffix(".png")
     save_fit_figure(result, figure, title=Path(args.curve).name)

@@ -18,13 +18,18 @@ import equinox as eqx
 
 from ._network import Network, is_traced
 from ._path import PathSettings
-from ._probe import applied_loads, check_compress_inputs, compress_settings, package_path
+from ._probe import (
+    applied_loads,
+    check_compress_inputs,
+    compress_settings,
+    package_path,
+)
 from ._protocol import Checkpoint, Progress, run_phases
 from ._quadrature import get_quadrature
 from ._residual import SOCBModel
 from ._result import CompressionResult
 from ._sampled import compress_at
-from ._solution import ConvergenceError, result_message
+from ._solution import RESULTS, ConvergenceError, result_message
 from ._sparsity import linear_solver_for
 
 __all__ = ["compress"]
@@ -77,7 +82,9 @@ def compress(network: Network, displacement, *, at=None, unload: bool = False, m
         with ``throw=False`` check ``result.completed`` / ``result.result``.
     parameters : extra JSON-able metadata stored in the result (e.g. builder arguments).
     """
-    network, displacement = check_compress_inputs(network, displacement)
+    network, displacement = check_compress_inputs(network, displacement, unload=unload, method=method,
+                                                  perturbation=perturbation, parameters=parameters, throw=throw,
+                                                  progress=progress)  # all before any work
     settings = compress_settings(settings, method, displacement)
     checkpoint = _checkpoint(checkpoint)
     model = SOCBModel(network, get_quadrature(settings.quadrature_order))
@@ -92,8 +99,16 @@ def compress(network: Network, displacement, *, at=None, unload: bool = False, m
     rec, extra, result = run_phases(model, displacement, unload, settings, inner, progress=bar, checkpoint=checkpoint)
     out = package_path(model, rec, extra, result, settings, float(displacement), unload, parameters)
     if throw and not out.completed:
-        err = ConvergenceError(f"compress stopped: {result_message(out.result)} (reached u = {out.displacement[-1]:.4g} µm, "
-                               f"{out.n_steps} steps). Try method='arclength', smaller PathSettings steps, or throw=False.")
-        err.result = out
-        raise err
+        if out.result == RESULTS.surface_crossed:
+            k = next(p.step for p in out.limit_points if p.kind == "surface_crossing")
+            raise _error(out, f"compress: {result_message(out.result)}; first at step {k}, u = {out.displacement[k]:.4g} µm "
+                         "(throw=False returns the path)")
+        raise _error(out, f"compress stopped: {result_message(out.result)} (reached u = {out.displacement[-1]:.4g} µm, "
+                     f"{out.n_steps} steps). Try method='arclength', smaller PathSettings steps, or throw=False.")
     return out
+
+
+def _error(result: CompressionResult, message: str) -> ConvergenceError:
+    err = ConvergenceError(message)
+    err.result = result
+    return err

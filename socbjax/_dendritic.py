@@ -30,53 +30,47 @@ Reading of the paper where it is ambiguous (documented choices):
 
 from __future__ import annotations
 
-import numbers
-
 import jax.numpy as jnp
 import numpy as np
 
+from ._checks import (
+    MAX_SEGMENTS,
+    MIN_BRANCH_ANGLE,
+    check_dim,
+    check_int,
+    check_real,
+    check_size,
+)
 from ._network import Network, is_traced, make_network
 from ._perturbation import strand_perturbation
 
-__all__ = ["unit_dendritic_mesh", "dendritic_outcrop"]
+__all__ = ["dendritic_outcrop", "unit_dendritic_mesh"]
+
+MAX_REDRAWS = 100_000  # draws per daughter: a bound on the time an impossible branch angle can take
 
 
-def _positive(name, value, unit):
-    """A concrete positive float; traced values are refused (they would fix the topology)."""
+def _length(name, value):
+    """A concrete positive length (µm); traced values are refused (they fix the topology)."""
     if is_traced(value):
         raise TypeError(f"{name} fixes the network's topology (number and placement of segments) and must be a "
                         "concrete number, not a traced JAX value; only EI and perturbation may be traced here")
-    if isinstance(value, bool) or not isinstance(value, numbers.Real) or not np.isfinite(value) or value <= 0:
-        raise ValueError(f"{name} must be a positive number ({unit}), got {value!r}")
-    return float(value)
+    return check_real(name, value, "µm", low=0.0)
 
 
-def _value(name, value, unit, *, allow_zero=False):
-    """A continuous value that may be traced (EI, perturbation): concrete ones are checked."""
-    if is_traced(value):
-        return jnp.asarray(value, jnp.float64)
-    if isinstance(value, bool) or not isinstance(value, numbers.Real) or not np.isfinite(value) or \
-            (value < 0 if allow_zero else value <= 0):
-        kind = "non-negative" if allow_zero else "positive"
-        raise ValueError(f"{name} must be a {kind} number ({unit}), got {value!r}")
-    return float(value)
-
-
-def _angle(branch_angle, traced_ok=False):
+def _angle(branch_angle, *, traced_ok=False, high=180.0, why=""):
+    """The branch angle (degrees) in radians, checked to lie in [MIN_BRANCH_ANGLE,
+    high − MIN_BRANCH_ANGLE]; a traced angle is passed on when ``traced_ok``."""
     if is_traced(branch_angle):
         if not traced_ok:
             raise TypeError("branch_angle shapes the random growth (which strands reach the surface) and must be "
                             "concrete here; fit it with socbjax.UnitMeshModel")
         return jnp.deg2rad(jnp.asarray(branch_angle, jnp.float64))
-    if isinstance(branch_angle, bool) or not isinstance(branch_angle, numbers.Real) or not 0 < branch_angle < 180:
-        raise ValueError(f"branch_angle must be in (0, 180) degrees, got {branch_angle!r}")
-    return np.deg2rad(float(branch_angle))
-
-
-def _dim(dim):
-    if isinstance(dim, bool) or not isinstance(dim, numbers.Integral) or dim not in (2, 3):
-        raise ValueError(f"dim must be 2 or 3 (an integer), got {dim!r}")
-    return int(dim)
+    angle = check_real("branch_angle", branch_angle, "degrees")
+    lo, hi = MIN_BRANCH_ANGLE, high - MIN_BRANCH_ANGLE
+    if not lo <= angle <= hi:
+        raise ValueError(f"branch_angle must be in (0°, {high:g}°) exclusive and at least {lo:g}° away from both ends, "
+                         f"i.e. in [{lo:g}°, {hi:g}°]; got {angle:g}{why}")
+    return np.deg2rad(angle)
 
 
 class _Grower:
@@ -132,15 +126,16 @@ def _pieces(length, segment_length):
     return pieces
 
 
-def _rotate_away(direction, angle, rng, dim, max_redraws):
+def _rotate_away(direction, angle, rng, dim, max_redraws, basis=None):
     """A unit vector at ``angle`` to ``direction`` with random azimuth, with positive last
-    component (redrawn otherwise)."""
+    component (redrawn otherwise).  ``basis`` [3, 2]: :func:`_lateral_basis` of
+    ``direction``, if already known (3D)."""
     for _ in range(max_redraws):
         if dim == 2:
             side = rng.choice([-1.0, 1.0])
             normal = side * np.array([-direction[1], direction[0]])
         else:
-            basis = np.linalg.svd(np.eye(3) - np.outer(direction, direction))[0][:, :2]
+            basis = _lateral_basis(direction) if basis is None else basis
             psi = rng.uniform(0.0, 2 * np.pi)
             normal = basis @ np.array([np.cos(psi), np.sin(psi)])
         new = np.cos(angle) * direction + np.sin(angle) * normal
@@ -150,6 +145,12 @@ def _rotate_away(direction, angle, rng, dim, max_redraws):
         f"no daughter direction at this branch angle points away from the probe after {max_redraws} draws; "
         "use a smaller branch_angle"
     )
+
+
+def _lateral_basis(direction) -> np.ndarray:
+    """[3, 2] orthonormal basis of the plane perpendicular to unit ``direction`` (the same
+    for every branching of a strand: computed once per strand)."""
+    return np.linalg.svd(np.eye(3) - np.outer(direction, direction))[0][:, :2]
 
 
 def unit_dendritic_mesh(
@@ -178,16 +179,26 @@ def unit_dendritic_mesh(
     ``daughter_segments``: split the daughter into this many equal segments (default: pieces
     of ``segment_length``).  ``EI``, ``perturbation`` and ``branch_angle`` may be traced JAX
     values (``branch_angle`` then needs ``daughter_segments``: the count is topology).
+
+    Limits (checked before anything is built or traced; ``TypeError`` for a wrong type,
+    ``ValueError`` for a wrong value, naming the argument): ``EI``, ``mother_length``,
+    ``segment_length``, ``daughter_length`` finite and positive; ``perturbation`` finite and
+    ≥ 0; ``branch_angle`` in [0.1°, 179.9°] (a daughter parallel or antiparallel to the
+    mother overlaps it), below 90° unless ``daughter_length`` or ``daughter_segments`` is
+    given; ``dim`` the integer 2 or 3; ``daughter_segments`` an integer ≥ 1; at most 200,000
+    segments in all (``socbjax._checks.MAX_SEGMENTS``: e.g. ``branch_angle=89.999999``, whose
+    daughter would need 10⁸ segments to reach the surface, is refused).
     """
-    dim = _dim(dim)
-    EI = _value("EI", EI, "pN·µm²")
-    perturbation = _value("perturbation", perturbation, "pN", allow_zero=True)
-    L, ell = (_positive(n, v, "µm") for n, v in (("mother_length", mother_length), ("segment_length", segment_length)))
+    dim = check_dim(dim)
+    EI = check_real("EI", EI, "pN·µm²", low=0.0)
+    perturbation = check_real("perturbation", perturbation, "pN", low=0.0, low_open=False)
+    L, ell = _length("mother_length", mother_length), _length("segment_length", segment_length)
     phi = _angle(branch_angle, traced_ok=True)
     half = 0.5 * L / ell
+    check_size("segment_length", segment_length, 2 * half, fix="use a larger segment_length or a shorter mother_length")
     if abs(half - round(half)) > 1e-9 or round(half) < 1:
         raise ValueError(f"segment_length must divide half the mother ({0.5 * L} µm) into whole segments, got {ell}")
-    pieces, hinged = _daughter_pieces(phi, L, ell, daughter_length, daughter_segments)
+    pieces, hinged = _daughter_pieces(phi, L, ell, daughter_length, daughter_segments, 2 * round(half))
     m, k = 2 * round(half), len(pieces)
     axis, side = np.eye(dim)[-1], np.eye(dim)[0]
     xp = jnp if is_traced(phi, pieces) else np
@@ -211,11 +222,15 @@ def unit_dendritic_mesh(
     return _finish(net, perturbation, 0)
 
 
-def _daughter_pieces(phi, L, ell, daughter_length, daughter_segments):
-    """(segment lengths of the daughter, whether it is hinged on the surface)."""
-    if daughter_segments is not None and (isinstance(daughter_segments, bool)
-                                          or not isinstance(daughter_segments, numbers.Integral) or daughter_segments < 1):
-        raise ValueError(f"daughter_segments must be a positive integer, got {daughter_segments!r}")
+def _daughter_pieces(phi, L, ell, daughter_length, daughter_segments, mother_segments):
+    """(segment lengths of the daughter, whether it is hinged on the surface); the size
+    guard counts the segments before any list is built."""
+    if daughter_segments is not None:
+        daughter_segments = check_int("daughter_segments", daughter_segments, minimum=1, maximum=None)
+        check_size("daughter_segments", daughter_segments, mother_segments + daughter_segments,
+                   fix="use fewer daughter_segments")
+    if daughter_length is not None:
+        daughter_length = _length("daughter_length", daughter_length)
     if is_traced(phi):
         if daughter_segments is None or daughter_length is not None:
             raise TypeError("a traced branch_angle needs daughter_segments=<int> and daughter_length=None: the daughter "
@@ -223,26 +238,34 @@ def _daughter_pieces(phi, L, ell, daughter_length, daughter_segments):
         return jnp.full(daughter_segments, 0.5 * L / jnp.cos(phi) / daughter_segments), True
     reach = 0.5 * L / np.cos(phi) if np.cos(phi) > 1e-12 else np.inf
     if daughter_length is None:
-        if not np.isfinite(reach):
-            raise ValueError("a daughter at branch_angle >= 90° never reaches the surface; give daughter_length")
+        if not np.isfinite(reach) or np.cos(phi) <= 0:
+            raise ValueError(f"a daughter at branch_angle={np.degrees(phi):g}° (>= 90°) never reaches the surface; "
+                             "give daughter_length (µm) or a branch_angle below 90°")
         length, hinged = reach, True
     else:
-        Ld = _positive("daughter_length", daughter_length, "µm")
-        length, hinged = min(Ld, reach), bool(Ld >= reach - 1e-12)
+        length, hinged = min(daughter_length, reach), bool(daughter_length >= reach - 1e-12)
+    if daughter_segments is None:
+        culprit = ("branch_angle", float(np.degrees(phi))) if daughter_length is None or reach < daughter_length else (
+            "daughter_length", daughter_length)
+        check_size(*culprit, mother_segments + np.ceil(length / ell), fix=(
+            f"the daughter is {length:.4g} µm long (it grows to the surface at z = {L:g} µm unless daughter_length is "
+            "shorter); use a smaller branch_angle, a shorter daughter_length, a larger segment_length or "
+            "daughter_segments=<int>"))
     return ([length / daughter_segments] * daughter_segments if daughter_segments else _pieces(length, ell)), hinged
 
 
 def _check_outcrop(generations, gap, growth, segment_length, EI, seed, max_redraws, perturbation):
-    if isinstance(generations, bool) or not isinstance(generations, numbers.Integral) or generations < 1:
-        raise ValueError(f"generations must be a positive integer, got {generations!r}")
-    if isinstance(seed, bool) or not isinstance(seed, numbers.Integral):
-        raise TypeError(f"seed must be an integer, got {seed!r}")
-    if isinstance(max_redraws, bool) or not isinstance(max_redraws, numbers.Integral) or max_redraws < 1:
-        raise ValueError(f"max_redraws must be a positive integer, got {max_redraws!r}")
-    gap, growth, ell = (_positive(n, v, "µm") for n, v in (("gap", gap), ("growth", growth), ("segment_length", segment_length)))
+    generations = check_int("generations", generations, minimum=1, maximum=None)
+    check_int("seed", seed, minimum=0, maximum=None, hint=" (numpy's random generator needs a non-negative seed)")
+    max_redraws = check_int("max_redraws", max_redraws, minimum=1, maximum=MAX_REDRAWS)
+    gap, growth, ell = (_length(n, v) for n, v in (("gap", gap), ("growth", growth), ("segment_length", segment_length)))
     if ell > growth:
         raise ValueError(f"segment_length ({ell} µm) must not exceed growth ({growth} µm) per generation")
-    return gap, growth, ell, _value("EI", EI, "pN·µm²"), _value("perturbation", perturbation, "pN", allow_zero=True)
+    check_size("segment_length", segment_length, np.ceil(growth / ell) + 1,
+               fix="use a larger segment_length or a smaller growth per generation")
+    EI = check_real("EI", EI, "pN·µm²", low=0.0)
+    perturbation = check_real("perturbation", perturbation, "pN", low=0.0, low_open=False)
+    return generations, gap, growth, ell, EI, perturbation, max_redraws
 
 
 def dendritic_outcrop(
@@ -267,22 +290,64 @@ def dendritic_outcrop(
     lateral force per strand (default 1e-4 pN, well below thermal forces k_BT/ℓ ≈ 8e-3 pN);
     ``max_redraws`` per daughter.  See the module docstring for the growth rules.
     Strand ends on the surface are the pinned nodes other than the probe node 0.
+
+    Limits (checked before growing; ``TypeError`` for a wrong type, ``ValueError`` for a
+    wrong value, naming the argument): ``generations`` an integer ≥ 1; ``gap``, ``growth``,
+    ``segment_length`` (≤ ``growth``), ``EI`` finite and positive; ``perturbation`` finite
+    and ≥ 0; ``branch_angle`` in [0.1°, 89.9°] (the first daughter of the mother, which grows
+    along +z, must head toward the surface); ``seed`` an integer ≥ 0; ``max_redraws`` an
+    integer in 1..100,000; ``dim`` the integer 2 or 3.  At most 200,000 segments
+    (``socbjax._checks.MAX_SEGMENTS``): the growth stops with a ``ValueError`` naming
+    ``generations`` as soon as it passes the limit (growth ends early, and costs nothing
+    more, once every strand has reached the surface).
     """
-    dim = _dim(dim)
-    gap, growth, ell, EI, perturbation = _check_outcrop(generations, gap, growth, segment_length, EI, seed, max_redraws,
-                                                        perturbation)
-    phi = _angle(branch_angle)
-    rng = np.random.default_rng(seed)
+    dim = check_dim(dim)
+    generations, gap, growth, ell, EI, perturbation, max_redraws = _check_outcrop(
+        generations, gap, growth, segment_length, EI, seed, max_redraws, perturbation)
+    phi = _angle(branch_angle, high=90.0, why=": the first daughter branches off the mother, which grows along +z, and "
+                 "must head toward the surface")
+    g = _grow_outcrop(generations, gap, growth, ell, phi, np.random.default_rng(seed), dim, max_redraws)
+    return g.build(EI, perturbation, seed)
+
+
+def _future_segments(growing, g, gap, growth, ell, remaining, first) -> int:
+    """A lower bound on the segments that the ``growing`` strands and their daughters still
+    add in the ``remaining`` generations: a strand whose path to the surface is longer than
+    ``growth`` + ¼ ``segment_length`` cannot reach it this generation, so it adds its
+    ``growth`` pieces (and, after the first generation, a daughter with at least one
+    segment) every generation until it can; granddaughters are not counted."""
+    reach = growth + 0.25 * ell
+    per_growth = len(_pieces(growth, ell))
+    total = 0
+    for s in growing:
+        to_surface = (gap - g.pos[s["tip"]][-1]) / s["direction"][-1]
+        r = min(max(int(np.ceil((to_surface - reach) / growth)) - 1, 0), remaining)  # − 1: round-off margin
+        total += r * per_growth + (r < remaining) + max(min(r, remaining - 1) - first, 0)
+    return total
+
+
+def _grow_outcrop(generations, gap, growth, ell, phi, rng, dim, max_redraws) -> _Grower:
+    """The growth rules of the module docstring, stopped by the size guard."""
     axis = np.eye(dim)[-1]
     g = _Grower(dim)
-    strands = [dict(tip=g.node(np.zeros(dim), axis), direction=axis, stopped=False)]
+    strands = [{"tip": g.node(np.zeros(dim), axis), "direction": axis, "stopped": False, "basis": None}]
     for generation in range(generations):
+        growing = [s for s in strands if not s["stopped"]]
+        if not growing:  # every strand has reached the surface: later generations change nothing
+            break
+        bound = len(g.segs) + _future_segments(growing, g, gap, growth, ell, generations - generation, generation == 0)
+        check_size("generations", generations, bound, what="segments at least", fix=(
+            f"a lower bound at generation {generation + 1}, from the {len(growing)} strands still below the surface and "
+            "their distances to it; use fewer generations, a smaller gap, a smaller branch_angle, or a larger growth "
+            "or segment_length"))
         if generation:
-            for s in [s for s in strands if not s["stopped"]]:
-                t_d = _rotate_away(s["direction"], phi, rng, dim, max_redraws)
+            for s in growing:
+                if dim == 3 and s["basis"] is None:
+                    s["basis"] = _lateral_basis(s["direction"])
+                t_d = _rotate_away(s["direction"], phi, rng, dim, max_redraws, s["basis"])
                 base = g.node(g.pos[s["tip"]], t_d)
                 g.attach.append((s["tip"], base))
-                strands.append(dict(tip=base, direction=t_d, stopped=False))
+                strands.append({"tip": base, "direction": t_d, "stopped": False, "basis": None})
         for k, s in enumerate(strands):
             if s["stopped"]:
                 continue
@@ -297,4 +362,9 @@ def dendritic_outcrop(
                 s["stopped"] = True
                 g.pos[s["tip"]][-1] = gap  # exactly on the surface
                 g.pinned.append(s["tip"])
-    return g.build(EI, perturbation, seed)
+            if len(g.segs) > MAX_SEGMENTS:  # checked per strand: one generation can add many
+                check_size("generations", generations, len(g.segs), what="segments at least", fix=(
+                    f"the outcrop passed the limit while growing generation {generation + 1} with "
+                    f"{sum(not s['stopped'] for s in strands)} strands still below the surface: use fewer generations, "
+                    "a smaller gap, or a larger growth or segment_length"))
+    return g

@@ -35,7 +35,8 @@ from jax.flatten_util import ravel_pytree
 from jax.sharding import Mesh, NamedSharding
 from jax.sharding import PartitionSpec as P
 
-from ._probe import applied_loads, check_compress_inputs, compress_settings, package_path, probe_network
+from ._probe import (applied_loads, check_compress_inputs, check_compress_options, compress_settings, package_path,
+                     probe_network)
 from ._linear import DenseLU, lu_sign
 from ._network import Network, is_traced
 from ._path import StepRecorder, follow_path, start_path
@@ -313,6 +314,14 @@ def _results(batch: _Batch, models, settings, unload) -> EnsembleResult:
                           batch.work[..., 0], batch.work[..., 1], batch.devices)
 
 
+def _where(member) -> str:
+    """Why a member did not complete, and where (µm)."""
+    crossing = [p for p in member.limit_points if p.kind == "surface_crossing"]
+    at = (f"first crossing at u = {crossing[0].displacement:.4g} µm" if crossing
+          else f"reached u = {member.displacement[-1]:.4g} µm")
+    return f"{result_message(member.result)} ({at})"
+
+
 # -------------------------------------------------------------------------------- API
 def _sampled_ensemble(nets, displacement, at, unload, perturbations, settings, throw) -> EnsembleResult:
     """The members sampled at ``at``: ``jax.vmap`` of the traced ``compress(..., at=...)``
@@ -373,6 +382,7 @@ def compress_ensemble(networks: Sequence[Network], displacement: float, *, at=No
     each member as a :class:`CompressionResult` (``result.member(i)``), equal to
     ``socbjax.compress(networks[i], ...)`` up to round-off.
     """
+    check_compress_options(unload=unload, method=method, throw=throw, progress=progress)  # before any work
     nets = _check_members(networks)
     perturbations = _member_perturbations(perturbation, len(nets))
     settings = compress_settings(settings, method, displacement)
@@ -400,8 +410,7 @@ def compress_ensemble(networks: Sequence[Network], displacement: float, *, at=No
     result = _results(batch, models, settings, unload)
     if throw and not result.completed.all():
         failed = np.flatnonzero(~result.completed)
-        lines = "; ".join(f"member {i}: {result_message(result.results[i].result)} (reached u = "
-                          f"{result.results[i].displacement[-1]:.4g} µm)" for i in failed[:8])
+        lines = "; ".join(f"member {i}: {_where(result.results[i])}" for i in failed[:8])
         err = ConvergenceError(f"compress_ensemble: {failed.size} of {len(result)} members did not complete "
                                f"({lines}{'; ...' if failed.size > 8 else ''}). Try method='arclength', smaller "
                                "PathSettings steps, or throw=False.")

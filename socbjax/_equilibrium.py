@@ -14,11 +14,14 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, Float
 
+from ._checks import check_int, check_vector, is_traced
 from ._curve import FilamentCurve, filament_curve
 from ._network import Network
 from ._solution import RESULTS, result_message
 
 __all__ = ["Solution", "node_stiffness"]
+
+MAX_CURVE_POINTS = 10_000  # points per segment of Solution.curve: far beyond what plots or integrals need
 
 
 def node_stiffness(network: Network):
@@ -76,7 +79,9 @@ class Solution(eqx.Module):
     def curve(self, points_per_segment: int = 16) -> FilamentCurve:
         """The smooth filament curve: ``s``, ``positions``, ``tangents``, ``curvature`` and
         ``moment`` at ``points_per_segment`` points of every segment (both ends included;
-        :class:`socbjax.FilamentCurve`).  For the jointed model: its rigid bars."""
+        :class:`socbjax.FilamentCurve`).  For the jointed model: its rigid bars.
+        ``points_per_segment``: an integer from 2 to 10,000."""
+        points_per_segment = check_int("points_per_segment", points_per_segment, minimum=2, maximum=MAX_CURVE_POINTS)
         bars = None
         if self.model == "jointed":
             d = self.state.directions
@@ -86,7 +91,11 @@ class Solution(eqx.Module):
 
     def end_rotation(self, node: int = -1) -> Array:
         """Rotation of the tangent at ``node`` from its reference direction (rad): signed
-        (counter-clockwise positive, winding kept) in 2D, the unsigned angle in 3D."""
+        (counter-clockwise positive, winding kept) in 2D, the unsigned angle in 3D.  ``node``:
+        an integer index, negative ones counted from the end (or a traced one, unchecked)."""
+        n = self.network.n_nodes
+        if not is_traced(node):  # a traced index stays a dynamic index
+            node = check_int("node", node, minimum=-n, maximum=n - 1, hint=f" (the network has {n} nodes)")
         t0 = self.network.tangents[node]
         if self.network.dim == 2:
             return self.angles[node] - jnp.arctan2(t0[1], t0[0])
@@ -96,10 +105,14 @@ class Solution(eqx.Module):
     def max_deflection(self, points_per_segment: int = 16, axis=None) -> Array:
         """Largest distance (µm) of the smooth curve from the reference axis: the line through
         the first node's reference position along ``axis`` (default: from the first to the
-        last node's reference position), e.g. the lateral deflection of a column."""
+        last node's reference position), e.g. the lateral deflection of a column.  A concrete
+        ``axis`` must be a finite non-zero vector of the network's dimension."""
+        points_per_segment = check_int("points_per_segment", points_per_segment, minimum=2, maximum=MAX_CURVE_POINTS)
         origin = self.network.positions[0]
         if axis is None:
             axis = self.network.positions[-1] - origin
+        elif not is_traced(axis):
+            axis = check_vector("axis", axis, self.network.dim, nonzero=True)
         axis = jnp.asarray(axis, jnp.float64)
         axis = axis / jnp.linalg.norm(axis)
         offsets = self.curve(points_per_segment).positions - origin

@@ -37,7 +37,7 @@ import numpy as np
 
 from ._fit_problem import BRANCHES, fit_problem
 from ._path import PathSettings
-from ._solution import RESULTS, ConvergenceError
+from ._solution import RESULTS, ConvergenceError, result_name
 
 __all__ = ["fit", "FitResult", "FitSettings", "OPTIMIZERS"]
 
@@ -98,7 +98,12 @@ class FitResult(eqx.Module):
     correlation, covariance : [p, p] over the free parameters.
     loss : final ½ Σ r² with r = (model − data)/σ (pN² when unweighted); rms : √(mean
         (model − data)²) (pN).
-    converged, message : whether the optimiser met its tolerance, and why it stopped.
+    converged, message : True only when the optimiser met its tolerance after moving the
+        parameters (or started at a stationary point) and the model explains the data
+        (R² > 0); ``message`` says why it stopped ("did not move ...", "hit the iteration
+        budget ...", "not a fit: R² = ..." otherwise; ``result`` then is
+        ``RESULTS.did_not_move``, ``nonlinear_max_steps_reached`` or ``poor_fit``).
+    r_squared : 1 − Σ(model − data)² / Σ(data − mean)² over the fitted points.
     identifiable : False when two free parameters are (nearly) perfectly correlated or JᵀJ is
         singular — then the values are not determined by the data (see ``warnings``).
     history : per iteration ``{"iteration", "loss", "values", "damping"}``.
@@ -114,6 +119,7 @@ class FitResult(eqx.Module):
     covariance: np.ndarray
     loss: float
     rms: float
+    r_squared: float
     converged: bool
     message: str
     identifiable: bool
@@ -145,6 +151,7 @@ class FitResult(eqx.Module):
 
     def to_dict(self) -> dict:
         out = {f.name: getattr(self, f.name) for f in dataclasses.fields(self) if f.name != "result"}
+        out["result"] = result_name(self.result)
         for key in ("correlation", "covariance", "compression", "force", "model_force"):
             out[key] = np.asarray(out[key]).tolist()
         out["residuals"] = self.residuals.tolist()
@@ -239,7 +246,7 @@ def _optax(loss_and_grad, loss_fn, z, optimizer, max_iterations, tolerance, lear
 
 
 # ------------------------------------------------------------------------------ fit
-def _check_start(problem) -> None:
+def _check_start(problem) -> float:
     """Evaluate the model once at the initial values, untraced, so that a path that cannot be
     followed over the data's range fails here with the solver's own message."""
     try:
@@ -251,6 +258,7 @@ def _check_start(problem) -> None:
         ) from None
     if not np.all(np.isfinite(r)):
         raise ValueError("the model gives non-finite forces at the initial values")
+    return 0.5 * float(r @ r)
 
 
 def _with_value(fn):
@@ -345,17 +353,31 @@ def fit(curve, model="unit-mesh", *, free=("EI",), fixed: dict | None = None, in
                           min_compression=settings.min_compression, method=settings.method, path=settings.path,
                           model_options=model_options)
     t0 = time.perf_counter()
-    _check_start(problem)
+    loss0 = _check_start(problem)
     bar = _Progress(progress, settings.max_iterations)
 
     def report(iteration, loss, z):
         bar(iteration, loss, _float_values(problem.to_values(z)))
 
     z, history, converged, message, evaluations, jac = _optimise(problem, settings, report)
-    return _result(problem, settings, jac, z, history, converged, message, evaluations, bar, t0)
+    return _result(problem, settings, jac, z, history, converged, message, evaluations, bar, t0, loss0)
 
 
-def _result(problem, settings, jac, z, history, converged, message, evaluations, bar, t0) -> FitResult:
+def _status(converged: bool, message: str, loss0: float, loss: float, r_squared: float):
+    """(result, message): "converged" only when the optimiser met its tolerance, the
+    parameters moved (or the start already was stationary) and the model explains the data."""
+    stationary_start = message.startswith("converged (gradient")
+    moved = loss < loss0 * (1.0 - 1e-12)
+    if not r_squared > 0.0:
+        return RESULTS.poor_fit, f"not a fit: R² = {r_squared:.3g} ({message})"
+    if not moved and not stationary_start:
+        return RESULTS.did_not_move, f"did not move from the initial values ({message})"
+    if not converged:
+        return RESULTS.nonlinear_max_steps_reached, f"hit the iteration budget: {message}"
+    return RESULTS.successful, message
+
+
+def _result(problem, settings, jac, z, history, converged, message, evaluations, bar, t0, loss0) -> FitResult:
     J, r = (np.asarray(a) for a in jac(jnp.asarray(z)))
     values = _float_values(problem.to_values(jnp.asarray(z)))
     if not (np.all(np.isfinite(r)) and np.all(np.isfinite(J))):
@@ -367,11 +389,17 @@ def _result(problem, settings, jac, z, history, converged, message, evaluations,
     free, table = problem.free, problem.table
     se, corr, cov, identifiable, warnings = _uncertainties(J, r, np.asarray(z), table, free)
     weighted, r = r, r * problem.sigma  # back to pN
+    spread = float(np.sum((problem.force - problem.force.mean()) ** 2))
+    r_squared = 1.0 - float(r @ r) / spread if spread > 0 else -math.inf
+    result, message = _status(converged, message, loss0, 0.5 * float(weighted @ weighted), r_squared)
+    if result != RESULTS.successful:
+        warnings = [f"{message}: {RESULTS[result]}"] + warnings
     return FitResult(
         model=problem.model.name, names=free, values=values, standard_errors=dict(zip(free, map(float, se))),
         correlation=corr, covariance=cov, loss=0.5 * float(weighted @ weighted), rms=float(np.sqrt(np.mean(r**2))),
-        converged=bool(converged), message=message, identifiable=identifiable, warnings=warnings, history=history,
+        converged=result == RESULTS.successful, message=message, identifiable=identifiable, warnings=warnings,
+        history=history, r_squared=r_squared,
         compression=problem.compression, force=problem.force, model_force=problem.force + r,
         units={n: table[n].unit for n in values}, optimizer=settings.optimizer, n_evaluations=int(evaluations) + 1,
-        elapsed_s=time.perf_counter() - t0, result=RESULTS.successful if converged else RESULTS.nonlinear_max_steps_reached,
+        elapsed_s=time.perf_counter() - t0, result=result,
     )

@@ -32,20 +32,22 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-__all__ = ["check_junctions", "transfer_segments", "director_targets", "moment_transfer", "nodal_couple_transfer"]
+from ._checks import GEOMETRY_RTOL, MIN_BRANCH_ANGLE, check_index_array
+
+__all__ = ["check_junction_geometry", "check_junctions", "director_targets", "moment_transfer", "nodal_couple_transfer", "transfer_segments"]
 
 
 def check_junctions(attach_pairs, n: int, degree, n_end, n_start, clamped, fixed_any, probe) -> np.ndarray:
     """Validate (mother, daughter) pairs [J, 2] (host side); returns ``attach`` [N] (the
     mother node of each daughter base node, the node itself otherwise)."""
     attach = np.arange(n)
-    pairs = np.zeros((0, 2), np.int64) if attach_pairs is None else np.asarray(attach_pairs)
-    if pairs.size and not np.issubdtype(pairs.dtype, np.integer):
-        raise TypeError(f"attach must hold integer node indices, got dtype {pairs.dtype}")
-    pairs = pairs.astype(np.int64).reshape(-1, 2)
-    if pairs.size and (pairs.min() < 0 or pairs.max() >= n):
-        bad = pairs[(pairs < 0) | (pairs >= n)][0]
-        raise ValueError(f"a junction references node {bad}, which does not exist (valid: 0..{n - 1})")
+    pairs = np.zeros((0, 2), np.int64) if attach_pairs is None else check_index_array("attach", attach_pairs, n)
+    if pairs.shape == (2,):  # a single (mother, daughter) pair
+        pairs = pairs[None]
+    if pairs.size == 0:
+        pairs = pairs.reshape(0, 2)
+    if pairs.ndim != 2 or pairs.shape[1] != 2:
+        raise ValueError(f"attach must be (mother node, daughter base node) pairs, shape [J, 2], got shape {pairs.shape}")
     if len(np.unique(pairs[:, 1])) != len(pairs):
         raise ValueError("duplicate junction: a daughter base node is attached more than once")
     for mother, daughter in pairs:
@@ -66,6 +68,40 @@ def check_junctions(attach_pairs, n: int, degree, n_end, n_start, clamped, fixed
     if np.any(attach[attach] != attach):
         raise ValueError("a daughter base node cannot itself be the mother node of a junction; branch from the strand")
     return attach
+
+
+def check_junction_geometry(attach: np.ndarray, positions, tangents, lengths) -> None:
+    """Concrete reference geometry of the junctions (skipped where traced): every daughter
+    base sits at its mother node (to ``GEOMETRY_RTOL`` of the shortest segment, plus
+    round-off) and the daughter's tangent makes an angle of [MIN_BRANCH_ANGLE,
+    180° − MIN_BRANCH_ANGLE] with the mother's: a daughter (nearly) parallel or antiparallel
+    to its mother overlaps it and the junction has no well-defined azimuth."""
+    daughters = np.flatnonzero(attach != np.arange(len(attach)))
+    if not daughters.size:
+        return
+    mothers = attach[daughters]
+    if positions is not None:
+        scale = GEOMETRY_RTOL * (1.0 if lengths is None else float(np.min(lengths)))
+        tol = scale + 64 * np.finfo(np.float64).eps * max(float(np.max(np.abs(positions))), 1.0)
+        gap = np.linalg.norm(positions[daughters] - positions[mothers], axis=1)
+        if np.any(gap > tol):
+            k = int(np.argmax(gap > tol))
+            raise ValueError(f"positions: the daughter base node {daughters[k]} of attach ({mothers[k]}, {daughters[k]}) is "
+                             f"{gap[k]:.6g} µm from its mother node; in the reference state a daughter starts at its "
+                             "mother node: give both the same position")
+    if tangents is not None:
+        a, b = tangents[daughters], tangents[mothers]
+        cross = np.linalg.norm(a[:, :, None] * b[:, None, :] - b[:, :, None] * a[:, None, :], axis=(1, 2)) / np.sqrt(2)
+        angle = np.degrees(np.arctan2(cross, np.sum(a * b, axis=1)))  # accurate near 0° and 180°, unlike arccos
+        slack = 1e-9  # degrees: the limits themselves (e.g. a builder's 0.1°) pass despite round-off
+        bad = (angle < MIN_BRANCH_ANGLE - slack) | (angle > 180.0 - MIN_BRANCH_ANGLE + slack)
+        if bad.any():
+            k = int(np.argmax(bad))
+            raise ValueError(
+                f"attach ({mothers[k]}, {daughters[k]}): the daughter's tangent (tangents[{daughters[k]}]) is at "
+                f"{angle[k]:.6g}° to the mother's (tangents[{mothers[k]}]); "
+                f"branch angles must lie in [{MIN_BRANCH_ANGLE:g}°, {180 - MIN_BRANCH_ANGLE:g}°] (a daughter parallel or "
+                "antiparallel to its mother overlaps it)")
 
 
 def transfer_segments(attach: np.ndarray, segments: np.ndarray, n_start: np.ndarray) -> np.ndarray:

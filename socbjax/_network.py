@@ -39,9 +39,24 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, Float
 
-from ._junction import check_junctions, transfer_segments
+from ._checks import check_array, check_vector, is_traced
+from ._junction import check_junction_geometry, check_junctions, transfer_segments
+from ._network_checks import (
+    check_degrees,
+    check_loops,
+    check_reference_state,
+    check_segments,
+    check_supported,
+    concrete_structure,
+    network_value,
+    node_flags,
+    probe_mask,
+    projectors,
+    strand_ids,
+    unit_tangents,
+)
 
-__all__ = ["Network", "Topology", "make_network", "DIFFERENTIABLE_FIELDS", "is_traced", "add_direction"]
+__all__ = ["DIFFERENTIABLE_FIELDS", "Network", "Topology", "add_direction", "is_traced", "make_network"]
 
 # Network arrays that carry values (traced, differentiable); everything else is topology.
 DIFFERENTIABLE_FIELDS = ("positions", "tangents", "lengths", "EI", "loads", "couples")
@@ -49,11 +64,6 @@ _STRUCTURE = ("segments", "position_projector", "clamped", "moment_free", "attac
               "leaving_segment", "probe", "probe_direction", "strand", "socb_rows")
 _DTYPES = {"position_projector": np.float64, "probe_direction": np.float64, "clamped": np.bool_, "moment_free": np.bool_,
            "probe": np.bool_}  # every other structure array is int32
-
-
-def is_traced(*trees) -> bool:
-    """True if any leaf of ``trees`` is a JAX tracer (inside jit, grad, vmap, ...)."""
-    return any(isinstance(leaf, jax.core.Tracer) for leaf in jax.tree_util.tree_leaves(trees))
 
 
 class Topology:
@@ -181,7 +191,7 @@ class Network(eqx.Module):
         new = {}
         for name, value in values.items():
             old = getattr(self, name)
-            xp = jnp if is_traced(value) or isinstance(value, jax.Array) else np  # concrete stays numpy (see _value)
+            xp = jnp if is_traced(value) or isinstance(value, jax.Array) else np  # concrete stays numpy (see network_value)
             arr = xp.asarray(value, dtype=np.float64)
             arr = xp.broadcast_to(arr, old.shape) if arr.ndim == 0 else arr
             if arr.shape != old.shape:
@@ -209,142 +219,12 @@ def _socb_rows(dim: int, director_fixed: np.ndarray, moment_free: np.ndarray) ->
     return np.flatnonzero(local.ravel()).astype(np.int32)
 
 
-def _concrete_structure(name: str, value):
-    if is_traced(value):
-        raise TypeError(
-            f"{name} fixes the network's topology and must be concrete (numpy or Python values), not a traced JAX "
-            "value: build the structure outside jax.jit/grad/vmap; only the values positions, tangents, lengths, EI, "
-            "loads and couples may be traced"
-        )
-    return value
-
-
-def _as_node_array(name: str, value, n: int, dtype, default) -> np.ndarray:
-    if value is None:
-        return np.full(n, default, dtype=dtype)
-    arr = np.asarray(_concrete_structure(name, value))
-    if arr.shape != (n,):
-        raise ValueError(f"{name} must have one entry per node ({n}), got shape {arr.shape}")
-    return arr.astype(dtype)
-
-
-def _value(name: str, value, shape: tuple, unit: str):
-    """(array of ``shape``, concrete numpy copy or None when traced); scalars broadcast.
-
-    Concrete values stay numpy arrays in the network: inside ``jax.jit`` even
-    ``jnp.asarray`` of a constant is a tracer, and the host-side logic that needs concrete
-    geometry (probe placement, input checks) must still see it."""
-    if value is None:
-        return np.zeros(shape), np.zeros(shape)
-    if is_traced(value):
-        arr = jnp.asarray(value, jnp.float64)
-        arr = jnp.broadcast_to(arr, shape) if arr.ndim == 0 or (arr.ndim == 1 and len(shape) == 1 and arr.shape == (1,)) else arr
-        if arr.shape != shape:
-            raise ValueError(f"{name} must have shape {shape} ({unit}), got {arr.shape}")
-        return arr, None
-    arr = np.asarray(value, dtype=np.float64)
-    if arr.ndim == 0:
-        arr = np.broadcast_to(arr, shape)
-    if arr.shape != shape:
-        raise ValueError(f"{name} must have shape {shape} ({unit}), got {arr.shape}")
-    if not np.all(np.isfinite(arr)):
-        raise ValueError(f"{name} contains NaN or infinite values; give finite {unit}")
-    arr = np.array(arr, copy=True)
-    return arr, arr
-
-
-def _check_segments(segments, n) -> np.ndarray:
-    seg = np.asarray(_concrete_structure("segments", segments))
-    if seg.size and not np.issubdtype(seg.dtype, np.integer):
-        if not np.all(seg == np.round(seg)):
-            raise ValueError("segments must hold integer node indices (got fractional values)")
-    seg = seg.astype(np.int64)
-    if seg.ndim != 2 or seg.shape[1] != 2:
-        raise ValueError(f"segments must have shape [S, 2], got {seg.shape}")
-    if seg.size and (seg.min() < 0 or seg.max() >= n):
-        raise ValueError(f"segments reference a node index outside 0..{n - 1}")
-    if np.any(seg[:, 0] == seg[:, 1]):
-        raise ValueError("a segment joins a node to itself; each segment needs two distinct nodes")
-    pairs = np.sort(seg, axis=1)
-    if len(np.unique(pairs, axis=0)) != len(pairs):
-        raise ValueError("two segments join the same pair of nodes (duplicate segment)")
-    return seg.astype(np.int32)
-
-
-def _check_values(positions, segments, lengths, EI):
-    """Checks that need concrete values (skipped for traced ones)."""
-    if lengths is not None and np.any(lengths <= 0):
-        raise ValueError("segment lengths must be positive (µm); remove zero-length segments")
-    if EI is not None and np.any(EI <= 0):
-        raise ValueError("EI must be positive (pN·µm²)")
-    if positions is not None and lengths is not None and len(segments):
-        chord = np.linalg.norm(positions[segments[:, 1]] - positions[segments[:, 0]], axis=1)
-        bad = chord <= 1e-9 * np.maximum(lengths, 1.0)
-        if np.any(bad):
-            raise ValueError(f"segment {int(np.argmax(bad))} has coincident end nodes (zero-length segment); merge or remove it")
-
-
-def _check_supported(n, segments, attach, clamped, projector, dim):
-    """Every connected piece must be held against rigid-body motion."""
-    parent = np.arange(n)
-
-    def find(i):
-        while parent[i] != i:
-            parent[i] = parent[parent[i]]
-            i = parent[i]
-        return i
-
-    for a, b in list(map(tuple, segments)) + [(i, attach[i]) for i in range(n) if attach[i] != i]:
-        ra, rb = find(a), find(b)
-        if ra != rb:
-            parent[ra] = rb
-    roots = np.array([find(i) for i in range(n)])
-    rank = np.einsum("nii->n", projector).round().astype(int)
-    for root in np.unique(roots):
-        members = roots == root
-        held = np.any(clamped[members] & (rank[members] >= dim)) or (
-            np.sum(rank[members] > 0) >= 2 and np.sum(np.minimum(rank[members], dim)) >= dim + 1
-        )
-        if not held:
-            nodes = np.flatnonzero(members)
-            raise ValueError(
-                f"the piece of the network with nodes {nodes[:8].tolist()}{'...' if len(nodes) > 8 else ''} is not held "
-                "against rigid-body motion; clamp one of its nodes or pin at least two"
-            )
-
-
-def _projectors(fixed_directions, n: int, dim: int) -> np.ndarray:
-    projector = np.zeros((n, dim, dim))
-    if fixed_directions is None:
-        return projector
-    _concrete_structure("fixed_directions", fixed_directions)
-    if len(fixed_directions) != n:
-        raise ValueError(f"fixed_directions needs one entry per node ({n}), got {len(fixed_directions)}")
-    for i, dirs in enumerate(fixed_directions):
-        dirs = np.asarray(dirs, dtype=np.float64).reshape(-1, dim)
-        if len(dirs):
-            q, _ = np.linalg.qr(dirs.T)
-            projector[i] = q @ q.T
-    return projector
-
-
-def _probe_mask(probe, n: int) -> np.ndarray:
-    mask = np.zeros(n, bool)
-    if probe is None:
-        return mask
-    idx = np.asarray(_concrete_structure("probe", probe)).ravel()
-    if idx.size and not np.issubdtype(idx.dtype, np.integer):
-        raise TypeError(f"probe must hold integer node indices, got dtype {idx.dtype}")
-    if idx.size and (idx.min() < -n or idx.max() >= n):
-        raise ValueError(f"probe references a node outside 0..{n - 1}")
-    mask[idx.astype(np.int64)] = True
-    return mask
-
-
 def _shapes(positions) -> tuple[int, int]:
+    if not is_traced(positions):
+        positions = check_array("positions", positions, "µm")
     shape = np.shape(positions)
-    if len(shape) != 2 or shape[1] not in (2, 3):
-        raise ValueError(f"positions must have shape [N, 2] or [N, 3], got {shape}")
+    if len(shape) != 2 or shape[1] not in (2, 3) or shape[0] < 2:
+        raise ValueError(f"positions must have shape [N, 2] or [N, 3] with N >= 2 nodes (µm), got {shape}")
     return shape
 
 
@@ -355,66 +235,73 @@ def make_network(positions, tangents, segments, lengths, EI, *, fixed_directions
     Parameters
     ----------
     positions, tangents : [N, d] reference node positions (µm) and unit tangents of the
-        straight, stress-free reference state.
-    segments : [S, 2] (start, end) node indices; a strand's segments run base to tip.
+        straight, stress-free reference state (N >= 2, d = 2 or 3).
+    segments : [S, 2] (start, end) node indices (integers); a strand's segments run base to tip.
     lengths, EI : [S] or scalars, contour length (µm) and bending stiffness (pN·µm²).
-    fixed_directions : list (one per node) of arrays [k, d] of directions along which the
-        node's position is prescribed (k = 0 free, ``np.eye(d)`` fixed point).
+    fixed_directions : list (one per node) of arrays [k, d] of non-zero directions along
+        which the node's position is prescribed (their span; k = 0 free, ``np.eye(d)`` fixed point).
     clamped : [N] bool, tangent prescribed (end nodes only).
-    attach : [J, 2] (mother node, daughter base node) pairs: Arp2/3 branch junctions.
+    attach : [J, 2] (mother node, daughter base node) pairs: Arp2/3 branch junctions; the
+        daughter base sits at the mother node, at an angle of 0.1°–179.9° to it.
     probe : node indices held by the rigid probe; probe_direction : [d] its direction of
         motion when compressing (default: from the first probe node toward the centroid of
         the other supported nodes, else −x).
     loads : [N, d] fixed external nodal forces (pN); couples : 2D [N] / 3D [N, 3] fixed
-        external nodal couples (pN·µm).  strand : [S] int strand ids.
+        external nodal couples (pN·µm).  strand : [S] non-negative integer strand ids.
 
     ``positions``, ``tangents``, ``lengths``, ``EI``, ``loads`` and ``couples`` may be JAX
     arrays or tracers (inside ``jax.jit``, ``jax.grad``, ``jax.vmap``): they become the
-    network's traced values, and the checks that need their values (positive lengths and EI,
-    distinct end nodes) are then skipped.  Everything else is topology and must be concrete.
+    network's traced values, and the checks that need their values are then skipped.
+    Everything else is topology and must be concrete.  With concrete values the reference
+    state must be straight and stress-free (relative tolerance 1e-6, see
+    :mod:`socbjax._network_checks`): unit tangents (normalised when within the tolerance),
+    each segment as long as its chord with the tangents at both its nodes along the chord,
+    no coincident end nodes, daughter bases at their mother nodes.  Segments and junctions
+    must form no closed loop, and every piece must be held against rigid-body motion.
     Moment-free ends are derived: nodes with one segment that are neither clamped nor
-    daughter bases.  Raises ``ValueError`` (``TypeError`` for traced topology) for
-    inconsistent input.
+    daughter bases.  Raises ``TypeError`` for wrong types (floats or booleans as indices,
+    strings, traced topology) and ``ValueError`` for inconsistent values; every message
+    names the argument.
     """
     n, dim = _shapes(positions)
-    seg = _check_segments(segments, n)
+    seg = check_segments(segments, n)
     s = len(seg)
-    positions, pos_np = _value("positions", positions, (n, dim), "µm")
-    tangents, tan_np = _value("tangents", tangents, (n, dim), "unit vectors")
-    lengths, len_np = _value("lengths", lengths, (s,), "µm")
-    EI, EI_np = _value("EI", EI, (s,), "pN·µm²")
-    loads, _ = _value("loads", loads, (n, dim), "pN")
-    couples, _ = _value("couples", couples, (n,) if dim == 2 else (n, 3), "pN·µm")
-    _check_values(pos_np, seg, len_np, EI_np)
-    n_start, n_end = np.bincount(seg[:, 0], minlength=n), np.bincount(seg[:, 1], minlength=n)
+    positions, pos_np = network_value("positions", positions, (n, dim), "µm")
+    tangents, tan_np = network_value("tangents", tangents, (n, dim), "unit vectors")
+    lengths, len_np = network_value("lengths", lengths, (s,), "µm", positive=True)
+    EI, _ = network_value("EI", EI, (s,), "pN·µm²", positive=True)
+    loads, _ = network_value("loads", loads, (n, dim), "pN")
+    couples, _ = network_value("couples", couples, (n,) if dim == 2 else (n, 3), "pN·µm")
+    if tan_np is not None:
+        tangents = tan_np = unit_tangents(tan_np)
+    n_start, n_end = check_degrees(seg, n)
     degree = n_start + n_end
-    if np.any(degree == 0):
-        raise ValueError(f"node {int(np.argmax(degree == 0))} belongs to no segment; remove it")
-    if np.any(degree > 2):
-        raise ValueError(f"node {int(np.argmax(degree > 2))} is shared by more than two segments; join filaments with "
-                         "branch junctions (attach=[(mother, daughter_base), ...]) instead")
-    clamped = _as_node_array("clamped", clamped, n, bool, False)
+    clamped = node_flags("clamped", clamped, n)
     if np.any(clamped & (degree != 1)):
-        raise ValueError("only end nodes (one segment) can be clamped")
-    projector = _projectors(fixed_directions, n, dim)
-    probe_mask = _probe_mask(probe, n)
-    direction = _probe_direction(probe_direction, probe_mask, projector, pos_np, dim)
-    projector = np.where(probe_mask[:, None, None], add_direction(projector, direction), projector)
+        raise ValueError(f"only end nodes (one segment) can be clamped; node {int(np.argmax(clamped & (degree != 1)))} "
+                         "has two")
+    projector = projectors(fixed_directions, n, dim)
+    probe_nodes = probe_mask(probe, n)
+    direction = _probe_direction(probe_direction, probe_nodes, projector, pos_np, dim)
+    if probe_nodes.any():
+        projector[probe_nodes] = add_direction(projector[probe_nodes], direction)
     fixed_any = np.einsum("nii->n", projector) > 0.5
-    attach_arr = check_junctions(_concrete_structure("attach", attach), n, degree, n_end, n_start, clamped, fixed_any, probe_mask)
+    attach_arr = check_junctions(concrete_structure("attach", attach), n, degree, n_end, n_start, clamped, fixed_any,
+                                 probe_nodes)
+    roots = check_loops(n, seg, attach_arr)
+    check_reference_state(pos_np, tan_np, seg, len_np)
+    check_junction_geometry(attach_arr, pos_np, tan_np, len_np)
     attached = attach_arr != np.arange(n)
-    _check_supported(n, seg, attach_arr, clamped, projector, dim)
+    check_supported(roots, clamped, projector, dim)
     moment_free = (degree == 1) & ~clamped & ~attached
-    strand = np.zeros(s, np.int32) if strand is None else np.asarray(_concrete_structure("strand", strand))
-    if strand.shape != (s,):
-        raise ValueError(f"strand must have one id per segment ({s}), got shape {strand.shape}")
+    strand = strand_ids(strand, s)
     leaving = np.full(n, s)
     leaving[seg[:, 0]] = np.arange(s)
     topology = Topology(
         dim=dim, segments=seg, position_projector=projector, clamped=clamped, moment_free=moment_free,
         attach=attach_arr.astype(np.int32), transfer_segment=transfer_segments(attach_arr, seg, n_start).astype(np.int32),
-        leaving_segment=leaving.astype(np.int32), probe=probe_mask, probe_direction=direction,
-        strand=strand.astype(np.int32), socb_rows=_socb_rows(dim, clamped | attached, moment_free),
+        leaving_segment=leaving.astype(np.int32), probe=probe_nodes, probe_direction=direction,
+        strand=strand, socb_rows=_socb_rows(dim, clamped | attached, moment_free),
     )
     return Network(positions=positions, tangents=tangents, lengths=lengths, EI=EI, loads=loads, couples=couples,
                    topology=topology)
@@ -443,7 +330,5 @@ def _probe_direction(direction, probe_mask, projector, positions, dim):
             if np.linalg.norm(d) > 1e-12:
                 return d / np.linalg.norm(d)
         return -np.eye(dim)[0]
-    d = np.asarray(_concrete_structure("probe_direction", direction), dtype=np.float64).ravel()
-    if d.shape != (dim,) or not np.all(np.isfinite(d)) or np.linalg.norm(d) < 1e-12:
-        raise ValueError(f"probe_direction must be a finite non-zero vector with {dim} components, got {direction!r}")
+    d = check_vector("probe_direction", concrete_structure("probe_direction", direction), dim, "direction", nonzero=True)
     return d / np.linalg.norm(d)

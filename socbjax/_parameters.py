@@ -21,6 +21,8 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from ._checks import check_real
+
 __all__ = ["Parameter", "NUISANCE_PARAMETERS"]
 
 
@@ -29,10 +31,14 @@ class Parameter:
     """One model or data parameter.
 
     name : identifier used by ``fit(free=..., fixed=...)`` and the command line.
-    value : default / initial value (in ``unit``).
+    value : default / initial value (in ``unit``), a finite real number.
     unit : e.g. "pN·µm²", "deg", "µm", "pN", "1".
-    lower, upper : open bounds (None: unbounded on that side).
+    lower, upper : open bounds, finite real numbers with lower < upper (None: unbounded on
+        that side).
     doc : one line: what it is.
+
+    Checked at construction: ``TypeError`` for a non-string name/unit/doc or a non-number
+    (including booleans), ``ValueError`` for NaN/infinite numbers or crossed bounds.
     """
 
     name: str
@@ -43,6 +49,15 @@ class Parameter:
     doc: str = ""
 
     def __post_init__(self):
+        if not isinstance(self.name, str) or not self.name:
+            raise TypeError(f"Parameter name must be a non-empty string, got {self.name!r}")
+        for field in ("unit", "doc"):
+            if not isinstance(getattr(self, field), str):
+                raise TypeError(f"parameter {self.name}: {field} must be a string, got {getattr(self, field)!r}")
+        check_real(f"parameter {self.name}: value", self.value, self.unit, traced_ok=False)
+        for field in ("lower", "upper"):
+            if getattr(self, field) is not None:
+                check_real(f"parameter {self.name}: {field}", getattr(self, field), self.unit, traced_ok=False)
         lo, hi = self.lower, self.upper
         if lo is not None and hi is not None and not lo < hi:
             raise ValueError(f"parameter {self.name}: lower bound {lo} must be below upper bound {hi}")

@@ -34,6 +34,7 @@ checkpoints of :func:`socbjax.compress`); the result is identical to an unchunke
 from __future__ import annotations
 
 import dataclasses
+import itertools
 
 import equinox as eqx
 import jax
@@ -43,6 +44,7 @@ from jax.flatten_util import ravel_pytree
 from jaxtyping import Array
 
 from ._adjoint import NonDifferentiable
+from ._checks import MAX_INT32, check_bool, check_choice, check_int, check_real
 from ._linear import Bordered
 from ._residual import Control
 from ._root import DampedNewton, newton_result, root_find
@@ -52,6 +54,18 @@ __all__ = ["PathSettings", "NaturalParameter", "PseudoArclength", "PathProblem",
            "StepRecorder", "StepRecords", "follow_path", "start_path", "parametrisation"]
 
 METHODS = ("displacement", "load", "natural", "arclength")
+MAX_QUADRATURE_ORDER = 16  # integration_matrix (a Vandermonde inverse) error: 7e-14 at 8, 8e-9 at 16, 1e-5 at 20
+MAX_STEPS_LIMIT = 1_000_000  # max_steps sizes the compress step buffers: [max_steps, unknowns] per phase
+_STEP = {"unit": "path parameter units", "low": 0.0}
+_REAL_FIELDS = {
+    "initial_step": _STEP, "min_step": _STEP, "max_step": _STEP,
+    "grow": {"unit": "factor", "low": 1.0, "low_open": False},
+    "max_corrector_ratio": {"unit": "fraction", "low": 0.0},
+    "max_turn": {"unit": "rad", "low": 0.0, "high": float(np.pi), "high_open": False},
+    "corrector_floor": {"unit": "relative", "low": 0.0},
+    "atol": {"unit": "dimensionless residual", "low": 0.0},
+}
+_COUNT_FIELDS = ("max_steps", "max_attempts", "fast_iterations", "max_iterations", "max_backtracks")
 
 
 class PathSettings(eqx.Module):
@@ -76,7 +90,18 @@ class PathSettings(eqx.Module):
     atol : Newton tolerance on ‖F‖∞ (dimensionless): ``socbjax.default_atol`` | 1e-10.
     max_iterations, max_backtracks : Newton caps: 40, 16 | 25, 12.
     linear_solver : "dense", "sparse" or "auto" (sparse above 1,500 unknowns): "auto".
-    quadrature_order : Gauss–Legendre points per SOCB segment (Eq. 7): 8.
+    quadrature_order : Gauss–Legendre points per SOCB segment (Eq. 7), an integer in 2..16
+        (above 16 the segment integration matrix loses accuracy: 1e-8 at 16, 1e-5 at 20): 8.
+
+    Checked at construction (concrete values; traced fields, see :meth:`traced`, pass
+    unchecked), so bad settings fail before anything is compiled, naming the field:
+    steps, ``max_corrector_ratio``, ``corrector_floor`` and ``atol`` finite and positive,
+    ``min_step <= initial_step <= max_step`` among those given; ``grow`` finite and ≥ 1;
+    ``max_turn`` in (0, π]; the counts integers (not booleans, not floats) ≥ 1, at most
+    2³¹ − 1 (int32 counters), ``max_steps`` at most 1,000,000 (it sizes the step buffers of
+    :func:`socbjax.compress`); ``method``, ``linear_solver`` one of their strings;
+    ``detect_critical_points`` a bool.  ``TypeError`` for a wrong type, ``ValueError`` for
+    a wrong value.
     """
 
     method: str | None = eqx.field(static=True, default=None)
@@ -98,13 +123,24 @@ class PathSettings(eqx.Module):
     quadrature_order: int = eqx.field(static=True, default=8)
 
     def __check_init__(self):
-        if self.method is not None and self.method not in METHODS:
-            raise ValueError(f"method must be one of {METHODS}, got {self.method!r}")
-        if self.linear_solver not in ("dense", "sparse", "auto"):
-            raise ValueError(f"linear_solver must be 'dense', 'sparse' or 'auto', got {self.linear_solver!r}")
-        if isinstance(self.quadrature_order, bool) or not isinstance(self.quadrature_order, (int, np.integer)) \
-                or self.quadrature_order < 2:
-            raise ValueError(f"quadrature_order must be an integer >= 2, got {self.quadrature_order!r}")
+        check_choice("PathSettings.method", self.method, METHODS, allow_none=True)
+        check_choice("PathSettings.linear_solver", self.linear_solver, ("dense", "sparse", "auto"))
+        check_int("PathSettings.quadrature_order", self.quadrature_order, minimum=2, maximum=MAX_QUADRATURE_ORDER)
+        check_bool("PathSettings.detect_critical_points", self.detect_critical_points)
+        for name, kwargs in _REAL_FIELDS.items():
+            value = getattr(self, name)
+            if value is not None and not isinstance(value, jax.core.Tracer):
+                check_real(f"PathSettings.{name}", value, **kwargs)
+        for name in _COUNT_FIELDS:
+            value = getattr(self, name)
+            if value is not None and not isinstance(value, jax.core.Tracer):
+                check_int(f"PathSettings.{name}", value, minimum=1,
+                          maximum=MAX_STEPS_LIMIT if name == "max_steps" else MAX_INT32)
+        steps = [(n, getattr(self, n)) for n in ("min_step", "initial_step", "max_step")]
+        steps = [(n, float(v)) for n, v in steps if v is not None and not isinstance(v, jax.core.Tracer)]
+        for (a, u), (b, v) in itertools.pairwise(steps):
+            if u > v:
+                raise ValueError(f"PathSettings needs min_step <= initial_step <= max_step; got {a}={u:g} > {b}={v:g}")
 
     def replace(self, **changes) -> PathSettings:
         """A copy with some fields changed."""
@@ -119,20 +155,11 @@ class PathSettings(eqx.Module):
         return out
 
     def check(self) -> None:
-        """Validate a filled settings object (concrete numbers only)."""
-        steps = [self.min_step, self.initial_step, self.max_step]
-        if any(isinstance(v, jax.core.Tracer) for v in steps):
-            return
-        if not all(np.isfinite(float(v)) for v in steps) or not 0 < float(steps[0]) <= float(steps[1]) <= float(steps[2]):
-            raise ValueError(f"need 0 < min_step <= initial_step <= max_step, got {steps[0]}, {steps[1]}, {steps[2]}")
-        for name in ("max_steps", "max_attempts", "max_iterations", "max_backtracks", "fast_iterations"):
-            value = getattr(self, name)
-            if not isinstance(value, jax.core.Tracer) and (isinstance(value, bool) or int(value) != value or value < 1):
-                raise ValueError(f"PathSettings.{name} must be a positive integer, got {value!r}")
-        for name in ("grow", "max_corrector_ratio", "max_turn", "atol", "corrector_floor"):
-            value = getattr(self, name)
-            if not isinstance(value, jax.core.Tracer) and not (np.isfinite(float(value)) and float(value) > 0):
-                raise ValueError(f"PathSettings.{name} must be a positive finite number, got {value!r}")
+        """Validate a filled settings object: every field set (the values themselves are
+        checked at construction)."""
+        missing = [f.name for f in dataclasses.fields(self) if getattr(self, f.name) is None and f.name != "method"]
+        if missing:
+            raise ValueError(f"PathSettings fields {missing} are not set; fill them with PathSettings.filled(...)")
 
     def traced(self) -> PathSettings:
         """The numeric fields as arrays: ``eqx.filter_jit`` traces arrays but holds Python

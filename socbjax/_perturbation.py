@@ -15,9 +15,10 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from ._checks import check_int, check_real
 from ._network import Network
 
-__all__ = ["strand_perturbation", "perturbation_pattern", "perturbation_plan", "default_perturbation", "strand_segments"]
+__all__ = ["default_perturbation", "perturbation_pattern", "perturbation_plan", "strand_perturbation", "strand_segments"]
 
 
 def strand_segments(network: Network) -> list[np.ndarray]:
@@ -79,7 +80,13 @@ def strand_perturbation(network: Network, magnitude, *, seed: int = 0):
     """Loads [N, d] (pN, a JAX array): a lateral force of ``magnitude`` (may be traced) on the
     middle node of every strand (the end node of its middle segment), perpendicular to the
     strand and to the probe direction where possible; random azimuth from ``seed`` in 3D,
-    alternating sign in 2D (single strands: always the first perpendicular, positive)."""
+    alternating sign in 2D (single strands: always the first perpendicular, positive).
+    A concrete ``magnitude`` must be finite and >= 0 and ``seed`` an integer >= 0
+    (``ValueError``/``TypeError`` naming them)."""
+    if not isinstance(network, Network):
+        raise TypeError(f"network must be a socbjax Network, got {type(network).__name__}")
+    magnitude = check_real("magnitude", magnitude, "pN", low=0.0, low_open=False)
+    seed = check_int("seed", seed, minimum=0, maximum=None, hint=" (numpy's random generator needs a non-negative seed)")
     pattern = perturbation_pattern(network.positions, perturbation_plan(network, seed), network.probe_direction,
                                    network.n_nodes)
     return jnp.asarray(magnitude, jnp.float64) * pattern

@@ -14,14 +14,16 @@ import jax.numpy as jnp
 import numpy as np
 from jax.flatten_util import ravel_pytree
 
+from ._checks import check_bool, check_choice, check_real, describe
 from ._network import Network, add_direction, is_traced
 from ._path import PROBE_PATH, PathSettings
 from ._perturbation import default_perturbation, perturbation_pattern, perturbation_plan, strand_segments
 from ._residual import routed_nodal_force, state_tangents
 from ._result import PHASES, CompressionResult, LimitPoint
+from ._solution import RESULTS, result_name
 
 __all__ = ["probe_network", "probe_gap", "applied_loads", "observe", "observe_rows", "compress_settings", "end_nodes",
-           "check_compress_inputs", "package_path", "parameters_json"]
+           "check_compress_inputs", "check_compress_options", "package_path", "parameters_json", "surface_crossing"]
 
 
 def _is_chain(network: Network) -> bool:
@@ -65,6 +67,34 @@ def probe_gap(network: Network) -> float:
     return float(((pos[fixed] - pos[probe].mean(axis=0)) @ network.probe_direction).max())
 
 
+# Nodes may sit this far beyond a plane before the crossing is flagged (µm, plus the same
+# fraction of the gap): round-off of the equilibrium, never a visible penetration.
+CROSSING_TOLERANCE = 1e-9
+
+
+def surface_crossing(network: Network, positions, displacement):
+    """[K] bool: row k has a node beyond the surface or behind the probe plane.
+
+    Heights h are measured from the probe's reference position along the probe direction;
+    the surface is the plane h = gap of the farthest opposing support (:func:`probe_gap`),
+    the probe plane h = u (probe displacement of the row).  ``positions`` [K, N, d] (µm),
+    ``displacement`` [K] (µm); numpy in, numpy out; JAX arrays (traced) in, JAX out.  Until
+    contact exists (no contact model yet) a crossing is a flagged status, never success."""
+    xp = jnp if is_traced(positions, displacement) or isinstance(positions, jax.Array) else np
+    pos0 = np.asarray(network.positions) if not is_traced(network.positions) else network.positions
+    direction = np.asarray(network.probe_direction)
+    fixed = (np.einsum("nii->n", network.position_projector) > 0.5) & ~network.probe
+    if not fixed.any():
+        return xp.zeros(np.shape(displacement), bool)
+    origin = pos0[network.probe].mean(axis=0)
+    gap = ((pos0[fixed] - origin) @ direction).max()
+    tol = CROSSING_TOLERANCE * (1.0 + abs(gap))
+    heights = (positions - origin) @ direction  # [K, N]
+    beyond_surface = xp.any(heights > gap + tol, axis=-1)
+    behind_probe = xp.any(heights < xp.asarray(displacement)[..., None] - tol, axis=-1)
+    return beyond_surface | behind_probe
+
+
 def applied_loads(network: Network, perturbation) -> jax.Array:
     """The loads [N, d] (pN) compressions apply: the network's loads plus ``perturbation``
     (pN) on every strand's middle; with ``perturbation=None`` the network's loads, or, if it
@@ -102,15 +132,20 @@ def compress_settings(settings, method, displacement) -> PathSettings:
     return settings
 
 
-def check_compress_inputs(network, displacement):
+def check_compress_inputs(network, displacement, *, unload=False, method=None, perturbation=None, parameters=None,
+                          throw=True, progress=False):
+    """Validate the arguments of :func:`socbjax.compress` before any work (host side):
+    (the network with its probe, the displacement as a float or a tracer).  ``TypeError``
+    for a wrong type, ``ValueError`` for a wrong value, naming the argument.  The keyword
+    arguments default to valid values, so callers that pass only the first two still work."""
     if not isinstance(network, Network):
         raise TypeError(f"network must be a socbjax Network (e.g. socbjax.column(...)), got {type(network).__name__}")
+    check_compress_options(unload=unload, method=method, perturbation=perturbation, parameters=parameters, throw=throw,
+                           progress=progress)
     network = probe_network(network)
     if is_traced(displacement):
         return network, displacement
-    u = float(displacement)
-    if not np.isfinite(u) or u <= 0:
-        raise ValueError(f"displacement must be a positive probe travel (µm), got {displacement!r}")
+    u = check_real("displacement", displacement, "µm of probe travel", low=0.0)
     if not is_traced(network.positions):
         gap = probe_gap(network)
         if not np.isfinite(gap):
@@ -120,6 +155,34 @@ def check_compress_inputs(network, displacement):
             raise ValueError(f"displacement {u} µm reaches the opposing support (gap {gap:.4g} µm between probe and "
                              "surface); choose a smaller displacement")
     return network, u
+
+
+def check_compress_options(*, unload=False, method=None, perturbation=None, parameters=None, throw=True, progress=False):
+    """The protocol options of :func:`socbjax.compress`: ``unload``/``throw`` bools,
+    ``method`` None/"displacement"/"arclength", ``perturbation`` None or a finite force
+    >= 0 (pN; may be traced), ``progress`` a bool or a callable, ``parameters`` None or a
+    dict with string keys whose values JSON can store (no NaN or infinity: the result's
+    metadata must be valid JSON)."""
+    check_bool("unload", unload)
+    check_bool("throw", throw)
+    check_choice("method", method, ("displacement", "arclength"), allow_none=True)
+    if perturbation is not None:
+        check_real("perturbation", perturbation, "pN", low=0.0, low_open=False)
+    if not (isinstance(progress, (bool, np.bool_)) or callable(progress)):
+        raise TypeError(f"progress must be True, False or a callable progress(phase, u, steps, done), got "
+                        f"{describe(progress)}")
+    if parameters is None:
+        return
+    if not isinstance(parameters, dict):
+        raise TypeError(f"parameters must be a dict of JSON-able metadata (or None), got {describe(parameters)}")
+    bad = [k for k in parameters if not isinstance(k, str)]
+    if bad:
+        raise TypeError(f"parameters keys must be strings (they become JSON object keys), got {bad[0]!r}")
+    try:
+        json.dumps(json.loads(parameters_json(parameters)), allow_nan=False)
+    except (TypeError, ValueError, OverflowError) as err:
+        raise ValueError(f"parameters must hold JSON-able values (numbers, strings, lists, dicts, None; no NaN or "
+                         f"infinity): {err}") from None
 
 
 @eqx.filter_jit
@@ -191,13 +254,20 @@ def package_path(model, rec, extra, result, settings, u_max, unload, parameters)
               "settings": {f: getattr(settings, f) for f in settings.__dataclass_fields__},
               "n_nodes": int(net.n_nodes), "n_segments": int(net.n_segments), "n_junctions": int(net.n_junctions),
               "gap_um": probe_gap(net) if np.isfinite(probe_gap(net)) else None, **(parameters or {})}
+    crossed = np.flatnonzero(surface_crossing(net, positions, np.asarray(rec["U"])))
+    events = _limit_points(np.asarray(rec["U"]), probe_force, rec["SIGN"], rec["PHASE"])
+    if crossed.size:
+        k = int(crossed[0])
+        events = tuple(sorted(events + (LimitPoint("surface_crossing", k, float(rec["U"][k]), float(probe_force[k]),
+                                                   PHASES[int(rec["PHASE"][k])]),), key=lambda e: e.step))
+        if result_name(result) == "successful":
+            result = RESULTS.surface_crossed
     return CompressionResult(
         displacement=np.asarray(rec["U"]), force=probe_force, converged=np.ones(len(rec["U"]), bool),
         stable=rec["SIGN"] == sign_ref, phase=rec["PHASE"].astype(np.int8), positions=positions, tangents=tangents,
         moments=moments, segment_forces=forces, end_nodes=ends, end_forces=axial[:, ends],
         iterations=rec["ITER"].astype(np.int32), result=result, network=net,
-        limit_points=_limit_points(np.asarray(rec["U"]), probe_force, rec["SIGN"], rec["PHASE"]),
-        parameters_json=parameters_json(params),
+        limit_points=events, parameters_json=parameters_json(params),
     )
 
 

@@ -20,6 +20,7 @@ import dataclasses
 import hashlib
 import sys
 import time
+import warnings
 from pathlib import Path
 
 import equinox as eqx
@@ -128,12 +129,32 @@ def _named_leaves(tree) -> dict:
     return {jax.tree_util.keystr(k): np.asarray(v) for k, v in jax.tree_util.tree_flatten_with_path(tree)[0]}
 
 
-def _from_named(template, arrays: dict):
+def _from_named(template, arrays: dict, where):
+    """The path state ``template`` with its leaves from ``arrays``, each checked for the
+    template's shape and dtype (a damaged or foreign checkpoint is refused, not resumed)."""
     paths, treedef = jax.tree_util.tree_flatten_with_path(template)
     missing = [jax.tree_util.keystr(k) for k, _ in paths if jax.tree_util.keystr(k) not in arrays]
     if missing:
-        raise ValueError(f"the checkpoint lacks the path-state fields {missing[:4]} (damaged or from another version)")
-    return jax.tree_util.tree_unflatten(treedef, [jnp.asarray(arrays[jax.tree_util.keystr(k)]) for k, _ in paths])
+        raise ValueError(f"{where} is not a valid socbjax checkpoint: it lacks the path-state fields {missing[:4]} "
+                         "(damaged or from another version); delete it to start afresh")
+    leaves = []
+    for key, leaf in paths:
+        value, name = np.asarray(arrays[jax.tree_util.keystr(key)]), jax.tree_util.keystr(key)
+        if value.shape != np.shape(leaf) or value.dtype != np.asarray(leaf).dtype:
+            raise ValueError(f"{where} is not a valid socbjax checkpoint: field {name} has shape {value.shape} and dtype "
+                             f"{value.dtype}, this run needs {np.shape(leaf)} {np.asarray(leaf).dtype}; delete it to "
+                             "start afresh")
+        leaves.append(jnp.asarray(value))
+    return jax.tree_util.tree_unflatten(treedef, leaves)
+
+
+def _check_records(records: dict, n: int, where) -> None:
+    """Recorded steps of a checkpoint: equal lengths, states of ``n`` unknowns, finite."""
+    lengths = {k: np.shape(v)[0] if np.ndim(v) else -1 for k, v in records.items()}
+    if set(records) != {"X", "U", "SIGN", "ITER", "PHASE"} or len(set(lengths.values())) != 1 \
+            or np.shape(records["X"])[1:] != (n,) or not np.all(np.isfinite(records["X"])):
+        raise ValueError(f"{where} is not a valid socbjax checkpoint: its recorded steps are damaged "
+                         f"({ {k: np.shape(v) for k, v in records.items()} }); delete it to start afresh")
 
 
 class _Run:
@@ -152,14 +173,27 @@ class _Run:
     def resume(self):
         from ._io import load_checkpoint
 
-        arrays, meta = load_checkpoint(self.checkpoint.path)
-        if meta.get("fingerprint") != self.fingerprint:
-            raise ValueError(f"checkpoint {self.checkpoint.path} belongs to a different run (network, loads or settings differ)")
-        self.start = int(meta["phase_index"])
+        where = self.checkpoint.path
+        arrays, meta = load_checkpoint(where)
+        if not isinstance(meta, dict) or meta.get("fingerprint") != self.fingerprint:
+            raise ValueError(f"checkpoint {where} belongs to a different run (network, loads or settings differ); "
+                             "rerun with the same arguments, or delete it to start afresh")
+        index = meta.get("phase_index")
+        if isinstance(index, bool) or not isinstance(index, int) or not 0 <= index < len(self.names):
+            raise ValueError(f"{where} is not a valid socbjax checkpoint: phase_index {index!r}; delete it to start afresh")
+        self.start = index
         self.saved = {k[6:]: v for k, v in arrays.items() if k.startswith("carry/")}
-        self.extra = {k[6:]: float(v) for k, v in arrays.items() if k.startswith("extra/")}
+        extra = {k[6:]: v for k, v in arrays.items() if k.startswith("extra/")}
+        if any(np.shape(v) != () or not np.isfinite(v) for v in extra.values()):
+            raise ValueError(f"{where} is not a valid socbjax checkpoint: damaged extra values; delete it to start afresh")
+        self.extra = {k: float(v) for k, v in extra.items()}
         records = {k[8:]: v for k, v in arrays.items() if k.startswith("records/")}
-        self.parts = [records] if "X" in records else []
+        if records:
+            _check_records(records, self.x0.shape[0], where)
+        self.parts = [records] if records else []
+        if index > 0 and (not self.parts or "u0" not in self.extra):
+            raise ValueError(f"{where} is not a valid socbjax checkpoint: phase {index} without the settled start; "
+                             "delete it to start afresh")
 
     def _save(self, index, state):
         if not self.checkpoint:
@@ -194,7 +228,7 @@ class _Run:
         x = self.x0 if index == 0 else jnp.asarray(self.parts[-1]["X"][-1])
         template = start_path(x, 0.0, self.settings, self.recorder)
         resumed = self.saved is not None and index == self.start
-        state = _from_named(template, self.saved) if resumed else template
+        state = _from_named(template, self.saved, self.checkpoint.path) if resumed else template
         ends = (0.0, 0.0) if index == 0 else ((u0, self.u_max) if index == 1 else (self.u_max, u0 + UNLOAD_MARGIN * (self.u_max - u0)))
         settings = self.settings.traced()
         first = True
@@ -229,7 +263,14 @@ def run_phases(model, u_max, unload, settings, inner, *, progress=None, checkpoi
     """Run the settle/loading/unloading phases on the host (concrete values); returns
     (records of every recorded step, extra {u0, sign_ref}, result)."""
     run = _Run(model, u_max, unload, settings, inner, progress or Progress(False, u_max), checkpoint)
-    if checkpoint and checkpoint.resume and Path(checkpoint.path).exists():
-        run.resume()
+    if checkpoint and Path(checkpoint.path).exists():
+        if checkpoint.resume:
+            run.resume()
+        else:  # never discard another run's checkpoint silently
+            warnings.warn(f"checkpoint {checkpoint.path} exists and resume=False: this run overwrites it at its first "
+                          "checkpoint (pass resume=True to continue that run instead)", stacklevel=3)
+    elif checkpoint and checkpoint.resume:
+        warnings.warn(f"resume=True but there is no checkpoint at {checkpoint.path}: starting from the beginning",
+                      stacklevel=3)
     result = run.run()
     return concat(run.parts), run.extra, result

@@ -34,7 +34,9 @@ class LimitPoint:
     kind : "force_maximum" / "force_minimum" (local extremum of the probe force along the
         path: the limit load a force-controlled test would snap at), "fold" (the probe
         displacement turns back: a snap-back, only on arclength paths) or "bifurcation"
-        (sign(det J) changes without a fold: a critical point of the tangent stiffness).
+        (sign(det J) changes without a fold: a critical point of the tangent stiffness), or
+        "surface_crossing" (the first step with a node beyond the surface or behind the probe
+        plane; the result is then ``RESULTS.surface_crossed``: no contact model yet).
     step : index of the recorded step at (or just after) the event.
     displacement, force : probe displacement (µm) and force (pN) at that step.
     phase : "loading" or "unloading".
@@ -148,7 +150,11 @@ class CompressionResult(eqx.Module):
         steps = f"{self.n_steps} step{'s' * (self.n_steps != 1)}"
         iterations = int(np.sum(np.asarray(self.iterations)))
         events = len(self.limit_points)
-        return (f"{'completed' if self.completed else 'FAILED: ' + self.status_message}; {steps} ({iterations} Newton "
+        status = "completed" if self.completed else "FAILED: " + self.status_message
+        crossing = [p for p in self.limit_points if p.kind == "surface_crossing"]
+        if crossing:
+            status += f" [first crossing at step {crossing[0].step}, u = {crossing[0].displacement:.4g} µm]"
+        return (f"{status}; {steps} ({iterations} Newton "
                 f"iteration{'s' * (iterations != 1)}), {peak}, max displacement {disp.max() if self.n_steps else 0:.4g} µm, "
                 f"{events} event{'s' * (events != 1)}, {unstable} step{'s' * (unstable != 1)} flagged unstable")
 

@@ -35,7 +35,7 @@ from jax.flatten_util import ravel_pytree
 from jaxtyping import Array
 
 from ._adjoint import ImplicitAdjoint
-from ._probe import applied_loads, end_nodes, observe, parameters_json, probe_gap
+from ._probe import applied_loads, end_nodes, observe, parameters_json, probe_gap, surface_crossing
 from ._network import is_traced
 from ._protocol import UNLOAD_MARGIN, phase_problem, settled_displacement
 from ._residual import Control
@@ -200,6 +200,8 @@ def compress_at(model, displacement, at=None, *, unload=False, perturbation=None
     U, X, iterations, converged, stable, result, observed, u0 = _sampled(loaded, displacement, at, bool(unload),
                                                                         settings.traced(), inner)
     positions, tangents, moments, forces, probe_force, axial = observed
+    crossed = jnp.any(surface_crossing(net, positions, U) & converged)
+    result = RESULTS.where((result == RESULTS.successful) & crossed, RESULTS.surface_crossed, result)
     M = at.shape[0]
     ends = end_nodes(net)
     params = {"unload": bool(unload), "sampled": True, "n_samples": int(M), "method": settings.method,
@@ -217,9 +219,14 @@ def compress_at(model, displacement, at=None, *, unload=False, perturbation=None
         result=result, network=loaded.network, limit_points=(), parameters_json=parameters_json(params))
     if not throw:
         return out
-    failed = ~jnp.all(converged)
+    failed = ~jnp.all(converged) | (result == RESULTS.surface_crossed)
     if is_traced(out):
-        return eqx.error_if(out, failed, "compress(at=...): a sampled equilibrium did not converge or lies beyond the path")
+        return eqx.error_if(out, failed, "compress(at=...): a sampled equilibrium did not converge, lies beyond the "
+                            "path, or has nodes beyond the surface or the probe plane (no contact model yet)")
+    if bool(failed) and bool(jnp.all(converged)):
+        err = ConvergenceError(f"compress(at=...): {result_message(result)}")
+        err.result = out
+        raise err
     if bool(failed):
         bad = np.flatnonzero(~np.asarray(converged))
         err = ConvergenceError(f"compress(at=...): {bad.size} sampled equilibria did not converge or lie beyond the path "

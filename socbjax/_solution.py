@@ -34,6 +34,19 @@ class RESULTS(optx.RESULTS):  # pyright: ignore
     max_steps = "the continuation used up its step budget (PathSettings.max_steps / max_attempts)"
     not_equilibrium = "the start of the path is not an equilibrium (Newton did not converge there)"
     not_reached = "a requested sample lies beyond the part of the path that was followed"
+    did_not_move = (
+        "the optimiser accepted no step: the parameters are still their initial values, so nothing was fitted (the data "
+        "may be in other units or far outside the model's range: check the curve's units, the initial values and bounds)"
+    )
+    poor_fit = (
+        "the fitted model explains none of the data's variation (R² ≤ 0: residuals as large as the data's spread about "
+        "their mean), so the values mean nothing; check the curve's units, its contact point and the model"
+    )
+    surface_crossed = (
+        "nodes of the network crossed the surface or the probe plane: socbjax has no contact model yet, so filaments "
+        "pass through both, and the path from that step on is not physical; stop before it (a smaller displacement: "
+        "see the 'surface_crossing' event in result.limit_points)"
+    )
 
 
 # Status codes of format_version 1 result files (socbjax 0.1 `Status`), by name.

@@ -22,10 +22,20 @@ import optimistix as optx
 from jax.flatten_util import ravel_pytree
 
 from ._adjoint import ImplicitAdjoint
+from ._checks import check_array, check_bool, check_int, check_real, describe
 from ._equilibrium import Solution, node_stiffness
 from ._jointed import JointedModel
 from ._network import Network, is_traced
-from ._path import LOAD_RAMP, NoRecorder, PathProblem, PathSettings, follow_path, position_weights, start_path
+from ._path import (
+    LOAD_RAMP,
+    MAX_QUADRATURE_ORDER,
+    NoRecorder,
+    PathProblem,
+    PathSettings,
+    follow_path,
+    position_weights,
+    start_path,
+)
 from ._quadrature import get_quadrature
 from ._residual import Control, SOCBModel, net_nodal_force
 from ._solution import RESULTS, ConvergenceError, result_message
@@ -40,6 +50,9 @@ def make_model(network: Network, model: str = "socb", *, quadrature_order: int =
     """The discretisation of ``network``: "socb" (:class:`SOCBModel`) or "jointed"."""
     if not isinstance(network, Network):
         raise TypeError(f"network must be a socbjax Network (e.g. socbjax.cantilever(...)), got {type(network).__name__}")
+    if not isinstance(model, str):
+        raise TypeError(f"model must be one of {MODELS} (a string), got {describe(model)}")
+    quadrature_order = check_int("quadrature_order", quadrature_order, minimum=2, maximum=MAX_QUADRATURE_ORDER)
     if model == "socb":
         return SOCBModel(network, get_quadrature(quadrature_order))
     if model == "jointed":
@@ -71,13 +84,13 @@ def _nodal(values, shape: tuple, what: str, unit: str, dim: int):
         out = xp.zeros(shape)
         for key, vec in values.items():
             node = _node_key(key, n, what)
-            v = xp.asarray(vec, np.float64)
+            v = xp.asarray(vec, np.float64) if xp is jnp else check_array(f"{what}[{key}]", vec, unit)
             if v.size != int(np.prod(width, dtype=int)) or (v.ndim > 1 if width else v.ndim > 0):
                 expected = "a scalar" if not width else f"{width[0]} components"
                 raise ValueError(f"{what} on node {key} must be {expected} (dim={dim}), got shape {np.shape(vec)}")
             out = out.at[node].add(v.reshape(width)) if xp is jnp else _add_at(out, node, v.reshape(width))
     else:
-        out = xp.asarray(values, np.float64)
+        out = xp.asarray(values, np.float64) if xp is jnp else check_array(what, values, unit)
         if out.shape != shape:
             raise ValueError(f"{what} array must have shape {shape} ({unit}), got {out.shape}")
     if not is_traced(out) and not bool(np.all(np.isfinite(np.asarray(out)))):
@@ -109,7 +122,10 @@ def default_atol(network: Network, atol: float = 1e-12):
     exact straight state.  The floor used is 16 ε max|r| / min ℓ (the 16 covers the few
     additions per row), e.g. 3.6e-11 for that chain and below 1e-12 up to ~300 segments.
     A float for concrete networks, a JAX scalar where positions or lengths are traced."""
-    xp = jnp if is_traced(network.positions, network.lengths) else np  # concrete: no device dispatch
+    if not isinstance(network, Network):
+        raise TypeError(f"network must be a socbjax Network (e.g. socbjax.cantilever(...)), got {type(network).__name__}")
+    atol = check_real("atol", atol, "dimensionless residual", low=0.0, low_open=False)
+    xp = jnp if is_traced(network.positions, network.lengths, atol) else np  # concrete: no device dispatch
     min_length = xp.min(network.lengths)
     scale = xp.maximum(xp.max(xp.abs(network.positions)), min_length)
     floor = xp.maximum(atol, 16 * np.finfo(np.float64).eps * scale / min_length)
@@ -211,6 +227,9 @@ def solve(network: Network, forces=None, couples=None, *, model: str = "socb", s
     """
     if not isinstance(network, Network):
         raise TypeError(f"network must be a socbjax Network (e.g. socbjax.cantilever(...)), got {type(network).__name__}")
+    throw = check_bool("throw", throw)
+    if not isinstance(model, str):
+        raise TypeError(f"model must be one of {MODELS} (a string), got {describe(model)}")
     settings = _settings(settings, network)
     loaded = network.replace(loads=network.loads + nodal_forces(network, forces),
                              couples=network.couples + nodal_couples(network, couples))

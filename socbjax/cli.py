@@ -6,14 +6,18 @@ Units everywhere: µm, pN, s; EI in pN·µm²; angles in degrees on the command 
 from __future__ import annotations
 
 import argparse
+import signal
 import sys
 from pathlib import Path
 
 from ._cli_fit import add_fit_parser, run_fit
+from ._solution import ConvergenceError
 
 __all__ = ["main"]
 
-_DEFAULT_DISPLACEMENT = {"unit-mesh": 0.6, "outcrop": 3.0, "column": None}
+# Defaults stop before the first node crosses the surface (no contact model yet): the unit mesh's mother at
+# u ≈ 0.40 µm, a free tip of the default 8-generation outcrop at u ≈ 0.23 µm.
+_DEFAULT_DISPLACEMENT = {"unit-mesh": 0.35, "outcrop": 0.2, "column": None}
 
 
 def _add_demo(sub) -> None:
@@ -41,7 +45,7 @@ def _add_simulate(sub) -> None:
         "--displacement",
         type=float,
         default=None,
-        help="total probe travel in µm (default: unit-mesh 0.6, outcrop 3.0, column 0.3 × length)",
+        help="total probe travel in µm (default: unit-mesh 0.35, outcrop 0.2, column 0.3 × length: before any node crosses the surface)",
     )
     sim.add_argument(
         "--no-unload",
@@ -113,11 +117,14 @@ def _parser() -> argparse.ArgumentParser:
         description="SOCB simulator of slender elastic filaments (units: µm, pN, s; EI in pN·µm²). Compiled "
         "programs are cached in ~/.cache/socbjax/jax (set SOCBJAX_CACHE_DIR to another folder, or to off).",
     )
+    parser.add_argument("--debug", action="store_true", help="show Python tracebacks for errors (default: one line)")
     sub = parser.add_subparsers(dest="command", required=True)
     _add_demo(sub)
     _add_simulate(sub)
     _add_plot(sub)
     add_fit_parser(sub)
+    for command in sub.choices.values():  # --debug also after the command (SUPPRESS keeps the global one)
+        command.add_argument("--debug", action="store_true", default=argparse.SUPPRESS, help=argparse.SUPPRESS)
     return parser
 
 
@@ -165,56 +172,131 @@ def _build(args):
     return net, params, _DEFAULT_DISPLACEMENT[args.network]
 
 
+def _check_outputs(args, out: Path, checkpoint: Path) -> None:
+    """Every output of ``socbjax simulate`` checked before any work (no run is lost at the
+    final save), and another run's checkpoint never discarded silently."""
+    from ._io import check_output_path
+
+    check_output_path(out, "--out")
+    check_output_path(checkpoint, "the checkpoint next to --out")
+    if args.figures:
+        _check_folder(args.figures, "--figures")
+    if checkpoint.exists() and not args.resume:
+        raise ValueError(f"{checkpoint} holds the checkpoint of an interrupted run on this --out: continue it with "
+                         "--resume, or delete that file to start afresh")
+
+
+def _check_folder(folder, what: str) -> None:
+    """A figure folder: an existing folder, or absent with an existing parent folder."""
+    from ._io import check_output_path
+
+    folder = Path(folder).expanduser()
+    if folder.exists() and not folder.is_dir():
+        raise ValueError(f"{what} {folder} exists and is not a folder; give a folder for the PNG files")
+    check_output_path((folder if folder.is_dir() else folder.parent) / ".socbjax-write-test", what)
+
+
 def _simulate(args) -> int:
     import socbjax as sj
 
-    out = Path(args.out)
-    if not out.parent.exists():
-        raise SystemExit(f"socbjax simulate: the folder of --out does not exist: {out.parent}")
+    from ._io import output_lock
+
+    out = Path(args.out).expanduser()
+    checkpoint = out.with_name(out.name + ".ckpt.h5")
+    _check_outputs(args, out, checkpoint)
     net, params, default_u = _build(args)
     displacement = default_u if args.displacement is None else args.displacement
     steps = {} if args.max_step is None else dict(max_step=args.max_step, initial_step=min(0.02, args.max_step))
     settings = sj.PathSettings(linear_solver=args.linear_solver, **steps)
-    checkpoint = out.with_name(out.name + ".ckpt.h5")
-    print(
-        f"socbjax simulate {args.network}: {net.n_nodes} nodes, {net.n_segments} segments, "
-        f"{net.n_junctions} junctions; probe travel {displacement} µm{' and back' if args.unload else ''}",
-        file=sys.stderr,
-    )
-    result = sj.compress(
-        net,
-        displacement,
-        unload=args.unload,
-        method=args.method,
-        perturbation=args.perturbation,
-        settings=settings,
-        progress=not args.quiet,
-        checkpoint=sj.Checkpoint(checkpoint, every=args.checkpoint_every, resume=args.resume),
-        throw=False,
-        parameters=params,
-    )
-    sj.save(result, out)
-    if result.completed and checkpoint.exists():
-        checkpoint.unlink()
+    with output_lock(out):  # a second run on the same --out refuses instead of deleting our checkpoints
+        if args.resume and not checkpoint.exists():
+            print(f"socbjax simulate: no checkpoint at {checkpoint}; starting from the beginning", file=sys.stderr)
+        print(
+            f"socbjax simulate {args.network}: {net.n_nodes} nodes, {net.n_segments} segments, "
+            f"{net.n_junctions} junctions; probe travel {displacement} µm{' and back' if args.unload else ''}",
+            file=sys.stderr,
+        )
+        result = sj.compress(
+            net,
+            displacement,
+            unload=args.unload,
+            method=args.method,
+            perturbation=args.perturbation,
+            settings=settings,
+            progress=not args.quiet,
+            checkpoint=sj.Checkpoint(checkpoint, every=args.checkpoint_every, resume=args.resume and checkpoint.exists()),
+            throw=False,
+            parameters=params,
+        )
+        sj.save(result, out)
+        if checkpoint.exists() and result.result != sj.RESULTS.max_steps:  # the path ended: nothing to resume
+            checkpoint.unlink()
     if args.figures:
         sj.save_figures(result, args.figures)
     print(f"{out}: {result.summary()}")
     return 0 if result.completed else 1
 
 
+def _steps(text: str | None):
+    if text is None:
+        return None
+    try:
+        return [int(s) for s in text.split(",") if s.strip()]
+    except ValueError:
+        raise ValueError(f"--steps expects comma-separated step indices, e.g. 0,10,20; got {text!r}") from None
+
+
 def _plot(args) -> int:
     import socbjax as sj
 
-    result = sj.load(args.run)
-    out = Path(args.out) if args.out else Path(args.run).with_suffix("").with_name(Path(args.run).stem + "-figures")
-    steps = None if args.steps is None else [int(s) for s in args.steps.split(",")]
+    steps = _steps(args.steps)
+    run = Path(args.run).expanduser()
+    out = Path(args.out).expanduser() if args.out else run.with_name(run.stem + "-figures")
+    _check_folder(out, "--out")
+    result = sj.load(run)
     for path in sj.save_figures(result, out, steps=steps):
         print(path)
     return 0
 
 
+# Errors that mean "the user asked for something that cannot be done": one line, exit 2.
+_USER_ERRORS = (ValueError, TypeError, OSError, ImportError)
+
+
 def main(argv: list[str] | None = None) -> int:
+    """Run the command line; returns the exit status (0 success, 1 the run did not complete or
+    the fit did not converge, 2 a user error, printed as one line ``socbjax: error: ...``;
+    ``--debug`` shows the traceback instead)."""
     args = _parser().parse_args(argv)
+    if hasattr(signal, "SIGXFSZ"):  # over a file-size limit, writes fail with EFBIG (an OSError) instead of killing us
+        signal.signal(signal.SIGXFSZ, signal.SIG_IGN)
+    try:
+        return _dispatch(args)
+    except _USER_ERRORS as err:
+        if args.debug:
+            raise
+        print(f"socbjax: error: {_one_line(err)}", file=sys.stderr)
+        return 2
+    except ConvergenceError as err:  # the problem has no answer at these inputs: said in one line too
+        if args.debug:
+            raise
+        print(f"socbjax: error: {_one_line(err)}", file=sys.stderr)
+        return 1
+    except KeyboardInterrupt:
+        if args.debug:
+            raise
+        print("socbjax: interrupted", file=sys.stderr)
+        return 130
+
+
+def _one_line(err: BaseException) -> str:
+    if isinstance(err, OSError) and err.strerror:  # without the "[Errno N]" prefix
+        text = f"{err.filename}: {err.strerror}" if err.filename is not None else err.strerror
+        return " ".join(text.split())
+    return " ".join(str(err).split()) or type(err).__name__
+
+
+def _dispatch(args) -> int:
     from ._cache import enable_compilation_cache
 
     enable_compilation_cache()  # a second run of the same network does not recompile ($SOCBJAX_CACHE_DIR, "off")
@@ -228,10 +310,7 @@ def main(argv: list[str] | None = None) -> int:
     if args.command == "plot":
         return _plot(args)
     if args.command == "fit":
-        try:
-            return run_fit(args)
-        except (ValueError, FileNotFoundError, ImportError) as err:
-            raise SystemExit(f"socbjax fit: {err}") from None
+        return run_fit(args)
     return 2  # pragma: no cover - argparse enforces the choices
 
 

@@ -331,3 +331,26 @@ def test_unsupported_extension(tmp_path):
     path.write_text("1 2 3\n")
     with pytest.raises(ValueError, match="unsupported"):
         load_curve(path)
+
+
+@pytest.mark.parametrize("content, match", [
+    (bytes(range(256)) * 8, r"binary.csv: a binary file"),
+    ("compression_um,force_pN\n0,0\n1,1\n".encode("utf-16"), r"binary.csv: a binary file"),  # UTF-16: NUL bytes
+    (b"compression_um,force_pN\n0,0\n1,\xff\n2,2\n", r"binary.csv: not UTF-8 text \(byte 30 is 0xff\)"),
+])
+def test_binary_or_undecodable_text_files_name_the_file(tmp_path, content, match):
+    path = tmp_path / "binary.csv"
+    path.write_bytes(content)
+    with pytest.raises(ValueError, match=match):
+        load_curve(path)
+
+
+@pytest.mark.parametrize("content", [b"", b"not a jpk archive at all", bytes(4096)])
+def test_damaged_instrument_files_are_value_errors(tmp_path, content):
+    """afmformats' reader errors derive from BaseException (escaping ``except Exception``):
+    they come back as one ValueError that names the file."""
+    pytest.importorskip("afmformats")
+    path = tmp_path / "damaged.jpk-force"
+    path.write_bytes(content)
+    with pytest.raises(ValueError, match="damaged.jpk-force"):
+        load_curve(path)

@@ -9,17 +9,17 @@ import socbjax as sj
 @pytest.mark.parametrize(
     "kwargs, match",
     [
-        (dict(n_nodes=1), "at least 2 nodes"),
-        (dict(n_nodes=4, length=0.0), "length must be positive"),
-        (dict(n_nodes=4, length=-1.0), "length must be positive"),
-        (dict(n_nodes=4, EI=0.0), "EI must be positive"),
-        (dict(n_nodes=4, EI=float("nan")), "EI must be finite"),
-        (dict(n_nodes=4, length=float("inf")), "length must be finite"),
-        (dict(n_nodes=4, direction=(0, 0, 0)), "non-zero"),
-        (dict(n_nodes=4, direction=(1, float("nan"), 0)), "direction must be finite"),
-        (dict(n_nodes=4, direction=(1, 0)), "3 components"),
-        (dict(n_nodes=4, dim=4), "dim must be 2 or 3"),
-        (dict(n_nodes=4, EI=[1.0, 2.0]), "one value per segment"),
+        ({"n_nodes": 1}, "at least 2 nodes"),
+        ({"n_nodes": 4, "length": 0.0}, "length must be positive"),
+        ({"n_nodes": 4, "length": -1.0}, "length must be positive"),
+        ({"n_nodes": 4, "EI": 0.0}, "EI must be positive"),
+        ({"n_nodes": 4, "EI": float("nan")}, "EI must be finite"),
+        ({"n_nodes": 4, "length": float("inf")}, "length must be finite"),
+        ({"n_nodes": 4, "direction": (0, 0, 0)}, "non-zero"),
+        ({"n_nodes": 4, "direction": (1, float("nan"), 0)}, "direction must be finite"),
+        ({"n_nodes": 4, "direction": (1, 0)}, "3 components"),
+        ({"n_nodes": 4, "dim": 4}, "dim must be 2 or 3"),
+        ({"n_nodes": 4, "EI": [1.0, 2.0]}, "one value per segment"),
     ],
 )
 def test_cantilever_rejects_bad_input(kwargs, match):
@@ -36,14 +36,19 @@ def test_n_nodes_must_be_integer():
 @pytest.mark.parametrize(
     "supports, match",
     [
-        (("clamped", "glued"), "unknown support 'glued'"),
+        (("clamped", "glued"), r"supports\[1\] must be one of .*got 'glued'"),
         (("free", "clamped"), "mechanism"),
         (("pinned", "free"), "mechanism"),
-        ("clamped", "pair"),
     ],
 )
 def test_column_rejects_bad_supports(supports, match):
     with pytest.raises(ValueError, match=match):
+        sj.column(4, supports=supports)
+
+
+@pytest.mark.parametrize("supports", ["clamped", None, ("clamped",), ("clamped", "free", "free"), ("clamped", 3)])
+def test_column_supports_must_be_a_pair_of_names(supports):
+    with pytest.raises(TypeError, match="supports"):
         sj.column(4, supports=supports)
 
 

@@ -1,6 +1,8 @@
 """The command line and the demo job (quick settings)."""
 
 import json
+import os
+import stat
 import subprocess
 import sys
 
@@ -55,3 +57,91 @@ def test_simulate_column_then_plot(tmp_path, capsys):
     pngs = sorted(p.name for p in (tmp_path / "figs").glob("*.png"))
     assert pngs == ["end_forces.png", "force_curve.png", "snapshots.png", "strand_forces.png"]
     assert all((tmp_path / "figs" / p).stat().st_size > 5_000 for p in pngs)
+
+
+# ------------------------------------------------------------------ errors and output paths
+def _user_error(capsys, argv) -> str:
+    """Run the command line; it must fail with exit 2 and one line ``socbjax: error: ...``."""
+    code = socbjax.cli.main(argv)
+    err = capsys.readouterr().err.strip().splitlines()
+    assert code == 2, err
+    assert err and err[-1].startswith("socbjax: error: ") and not any("Traceback" in line for line in err), err
+    return err[-1]
+
+
+@pytest.mark.parametrize("argv, words", [
+    (["simulate", "column", "--supports", "pinned,glued", "--out", "{tmp}/c.h5"], ["glued"]),
+    (["simulate", "column", "--nodes", "1", "--out", "{tmp}/c.h5"], ["n_nodes", "1"]),
+    (["simulate", "column", "--out", "{tmp}/missing/c.h5"], ["--out", "does not exist"]),
+    (["simulate", "column", "--out", "{tmp}"], ["--out", "folder"]),
+    (["simulate", "column", "--displacement", "5", "--out", "{tmp}/c.h5"], ["gap"]),
+    (["plot", "{tmp}/nothing.h5"], ["nothing.h5"]),
+    (["plot", "{tmp}/not-hdf5.h5"], ["not-hdf5.h5", "not a valid socbjax result"]),
+    (["plot", "{tmp}/not-hdf5.h5", "--steps", "1,x"], ["--steps"]),
+    (["fit", "{tmp}/binary.csv", "--out", "{tmp}/fit.json"], ["binary.csv", "binary"]),
+    (["fit", "{tmp}/curve.csv", "--out", "{tmp}/fit.json", "--fixed", "EI"], ["--fixed", "name=value"]),
+    (["fit", "{tmp}/curve.csv", "--out", "{tmp}/missing/fit.json"], ["--out", "does not exist"]),
+])
+def test_user_errors_are_one_line_with_exit_2(tmp_path, capsys, argv, words):
+    (tmp_path / "not-hdf5.h5").write_bytes(b"\x89HDF\r\n\x1a\n" + bytes(200))
+    (tmp_path / "binary.csv").write_bytes(bytes(range(256)) * 4)
+    (tmp_path / "curve.csv").write_text("compression_um,force_pN\n0,0\n0.1,1\n0.2,2\n")
+    line = _user_error(capsys, [a.replace("{tmp}", str(tmp_path)) for a in argv])
+    for word in words:
+        assert word in line, line
+    assert not list(tmp_path.glob("*.tmp")) and not list(tmp_path.glob(".*.tmp"))
+
+
+def test_debug_shows_the_traceback(tmp_path):
+    (tmp_path / "x.h5").write_bytes(b"junk")
+    with pytest.raises(ValueError, match="not a valid socbjax result"):
+        socbjax.cli.main(["plot", str(tmp_path / "x.h5"), "--debug"])
+    with pytest.raises(ValueError, match="not a valid socbjax result"):
+        socbjax.cli.main(["--debug", "plot", str(tmp_path / "x.h5")])
+
+
+def test_outputs_that_are_not_regular_files_are_refused_untouched(tmp_path, capsys):
+    fifo = tmp_path / "run.h5"
+    os.mkfifo(fifo)
+    line = _user_error(capsys, ["simulate", "column", "--out", str(fifo), "--quiet"])
+    assert "FIFO" in line and stat.S_ISFIFO(os.stat(fifo).st_mode)  # still the FIFO, not replaced
+
+
+def test_another_runs_checkpoint_is_never_discarded(tmp_path, capsys):
+    out = tmp_path / "run.h5"
+    checkpoint = tmp_path / "run.h5.ckpt.h5"
+    checkpoint.write_bytes(b"someone else's checkpoint")
+    line = _user_error(capsys, ["simulate", "column", "--out", str(out), "--quiet"])
+    assert "--resume" in line and checkpoint.read_bytes() == b"someone else's checkpoint" and not out.exists()
+
+
+def test_a_second_run_on_the_same_output_refuses(tmp_path, capsys):
+    out = tmp_path / "run.h5"
+    holder = subprocess.Popen([sys.executable, "-c", "import sys, time; from socbjax._io import output_lock\n"
+                               f"with output_lock({str(out)!r}):\n print('locked', flush=True); time.sleep(60)"],
+                              stdout=subprocess.PIPE, text=True)
+    try:
+        assert holder.stdout.readline().strip() == "locked"
+        line = _user_error(capsys, ["simulate", "column", "--dim", "2", "--nodes", "3", "--out", str(out), "--quiet"])
+        assert "another socbjax run" in line and str(holder.pid) in line and not out.exists()
+    finally:
+        holder.kill()
+        holder.wait()
+
+
+def test_a_full_disk_gives_one_line_and_keeps_the_previous_output(tmp_path):
+    """With a file-size limit below the result's size (as on a full disk) the run ends with
+    a one-line OSError and exit 2 — no signal, no traceback — the previous output intact."""
+    out = tmp_path / "run.h5"
+    out.write_bytes(b"the previous output")
+    code = ("import resource, sys; resource.setrlimit(resource.RLIMIT_FSIZE, (12_000, 12_000)); import socbjax.cli; "
+            "sys.exit(socbjax.cli.main(sys.argv[1:]))")
+    env = {**os.environ, "SOCBJAX_CACHE_DIR": "off"}
+    proc = subprocess.run([sys.executable, "-c", code, "simulate", "column", "--dim", "2", "--nodes", "3", "--displacement",
+                           "0.1", "--no-unload", "--out", str(out), "--quiet"], capture_output=True, text=True, env=env,
+                          timeout=300)
+    last = proc.stderr.strip().splitlines()[-1]
+    assert proc.returncode == 2, proc.stderr[-2000:]
+    assert last.startswith("socbjax: error: ") and str(out) in last and "Traceback" not in proc.stderr, proc.stderr[-2000:]
+    assert out.read_bytes() == b"the previous output"
+    assert not [p for p in tmp_path.iterdir() if p.name.endswith(".tmp")]

@@ -57,8 +57,9 @@ def test_fit_help_and_errors(tmp_path, capsys):
     assert "µm" in text and "pN" in text and "N/m" in text
     path = tmp_path / "curve.csv"
     path.write_text("compression_um,force_pN\n0.01,1\n0.02,2\n0.03,3\n0.04,4\n")
-    with pytest.raises(SystemExit, match="unknown parameter 'EJ'"):
-        socbjax.cli.main(["fit", str(path), "--model", "column", "--free", "EJ", "--out", str(tmp_path / "f.json")])
-    with pytest.raises(SystemExit, match="name=value"):
-        socbjax.cli.main(["fit", str(path), "--fixed", "EI", "--out", str(tmp_path / "f.json")])
+    capsys.readouterr()
+    for argv, words in ((["--model", "column", "--free", "EJ"], "unknown parameter 'EJ'"), (["--fixed", "EI"], "name=value")):
+        assert socbjax.cli.main(["fit", str(path), *argv, "--out", str(tmp_path / "f.json")]) == 2  # a user error
+        last = capsys.readouterr().err.strip().splitlines()[-1]
+        assert last.startswith("socbjax: error: ") and words in last
     assert not (tmp_path / "f.json").exists()

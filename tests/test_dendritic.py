@@ -71,7 +71,13 @@ def test_unit_mesh_geometry():
     ("kwargs", "match"),
     [
         ({"generations": -1}, "generations"),
-        ({"generations": 2.5}, "generations"),
+        ({"generations": 0}, "generations"),
+        ({"seed": -1}, "seed"),
+        ({"branch_angle": 90.0}, "branch_angle"),
+        ({"branch_angle": 0.0}, "branch_angle"),
+        ({"max_redraws": 0}, "max_redraws"),
+        ({"perturbation": float("nan")}, "perturbation"),
+        ({"segment_length": 1e-7}, "segment_length"),
         ({"gap": 0.0}, "gap"),
         ({"growth": -1.0}, "growth"),
         ({"segment_length": 2.0}, "segment_length"),
@@ -86,6 +92,31 @@ def test_outcrop_bad_input(kwargs, match):
         sj.dendritic_outcrop(**kwargs)
 
 
-def test_outcrop_seed_must_be_an_integer():
-    with pytest.raises(TypeError, match="seed"):
-        sj.dendritic_outcrop(seed=1.5)
+@pytest.mark.parametrize(
+    ("kwargs", "match"),
+    [
+        ({"seed": 1.5}, "seed"),
+        ({"seed": True}, "seed"),
+        ({"generations": 2.5}, "generations"),
+        ({"generations": 3.0}, "generations=3"),
+        ({"dim": 3.0}, "dim"),
+        ({"gap": "6"}, "gap"),
+        ({"EI": None}, "EI"),
+    ],
+)
+def test_outcrop_wrong_types(kwargs, match):
+    with pytest.raises(TypeError, match=match):
+        sj.dendritic_outcrop(**kwargs)
+
+
+def test_outcrop_size_guard_stops_the_growth_and_names_generations():
+    """Daughters at 89.9° barely climb: without the guard 10⁶ generations would grow forever."""
+    with pytest.raises(ValueError, match="generations=1000000 would build .* segments at least, more than the limit of 200,000"):
+        sj.dendritic_outcrop(generations=10**6, branch_angle=89.9, gap=50.0, growth=1.0, segment_length=1.0, dim=2)
+
+
+def test_outcrop_growth_ends_once_every_strand_is_on_the_surface():
+    """Later generations change nothing once all strands are hinged: 10⁹ of them are quick."""
+    small = sj.dendritic_outcrop(generations=5, gap=2.0, perturbation=0.0)
+    huge = sj.dendritic_outcrop(generations=10**9, gap=2.0, perturbation=0.0)
+    np.testing.assert_array_equal(np.asarray(small.positions), np.asarray(huge.positions))

@@ -31,7 +31,7 @@ def unit_mesh():
 def test_recovers_EI_and_branch_angle_from_noisy_curves(unit_mesh, seed):
     """2 % noise; start 50 % off in EI and 15° off in angle; EI within 2 %, angle within 1°,
     and the Gauss–Newton standard errors cover the truth (within 3 σ)."""
-    c = np.linspace(0.005, 0.5, 40)
+    c = np.linspace(0.005, 0.38, 40)  # below u ≈ 0.43 µm, where the mother crosses the surface
     F = _synthetic(unit_mesh, TRUTH, c, seed)
     result = sj.fit((c, F), unit_mesh, free=("EI", "branch_angle"), initial={"EI": 1.5 * 0.071, "branch_angle": 55.0})
     assert result.converged and result.identifiable, result.summary()
@@ -153,3 +153,15 @@ def test_unloading_branch_fit():
     assert result.values["EI"] == pytest.approx(0.08, rel=1e-5)
     with pytest.raises(ValueError, match="branch"):
         sj.fit((c, F), model, settings=sj.FitSettings(branch="retract"))
+
+
+def test_a_fit_that_explains_nothing_is_not_converged():
+    """Data in the wrong units (forces 1e12× the model's, as if N were read as pN): the
+    optimiser cannot reduce the loss; the fit must say so (not converged, R² ≤ 0, a
+    RESULTS item other than successful), never report success with unmoved parameters."""
+    model = ColumnModel(3, supports=("pinned", "pinned"))
+    c = np.linspace(0.02, 0.2, 6)
+    F = _synthetic(model, {"EI": 0.071}, c, seed=0, noise=0.0) * 1e12
+    result = sj.fit((c, F), model, free="EI", initial={"EI": 0.06}, settings=sj.FitSettings(max_iterations=5))
+    assert not result.converged and result.result in (sj.RESULTS.poor_fit, sj.RESULTS.did_not_move)
+    assert result.r_squared <= 0 and result.warnings and "R²" in result.message

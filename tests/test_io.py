@@ -1,9 +1,17 @@
 """HDF5 save/load of a CompressionResult and of checkpoints: exact round trips, atomic
 writes that leave no partial or temporary files, and clear errors for foreign files."""
 
+import contextlib
 import dataclasses
+import errno
+import fcntl
 import json
 import os
+import stat
+import subprocess
+import sys
+import tempfile
+from pathlib import Path
 
 import h5py
 import jax.numpy as jnp
@@ -12,6 +20,7 @@ import pytest
 
 import socbjax as sj
 from socbjax import CompressionResult, LimitPoint
+from socbjax._io import atomic_path, check_output_path, output_lock
 
 
 def make_result(dim=3, K=7, N=4, E=1, seed=0):
@@ -84,14 +93,18 @@ def test_file_layout_units_and_stamps(tmp_path):
     result = make_result()
     path = sj.save(result, tmp_path / "run.h5")
     with h5py.File(path, "r") as f:
-        assert f.attrs["format"] == "socbjax.compression"
-        assert f.attrs["format_version"] == 2
-        assert f.attrs["socbjax_version"] == sj.__version__
-        assert "created" in f.attrs and f.attrs["result"] == "max_steps"
-        assert f["units"].attrs["displacement"] == "µm" and f["units"].attrs["moments"] == "pN·µm"
-        assert f["path/force"].attrs["units"] == "pN"
+        # Strings are fixed-length UTF-8 (h5py reads them as bytes): kept in checksummed
+        # headers, out of HDF5's unchecksummed global heap.
+        text = {name: f.attrs[name].decode() for name in ("format", "socbjax_version", "created", "result")}
+        assert text["format"] == "socbjax.compression" and text["socbjax_version"] == sj.__version__
+        assert f.attrs["format_version"] == 2 and text["result"] == "max_steps"
+        assert f["units"].attrs["displacement"].decode() == "µm" and f["units"].attrs["moments"].decode() == "pN·µm"
+        assert f["path/force"].attrs["units"].decode() == "pN"
         assert f["network"].attrs["dim"] == 3
         assert list(f["limit_points/kind"].asstr()[()]) == ["force_maximum", "bifurcation"]
+        strings = [f.attrs.get_id(n).get_type() for n in f.attrs] + [f["limit_points/kind"].id.get_type()]
+        assert all(not t.is_variable_str() for t in strings if isinstance(t, h5py.h5t.TypeStringID))
+        assert f.id.get_create_plist().get_version()[0] >= 2  # superblock with a checksum
 
 
 def test_large_arrays_compressed_and_empty_limit_points(tmp_path):
@@ -204,7 +217,7 @@ def test_checkpoint_round_trip_is_bitwise(tmp_path, rng):
         assert isinstance(got, np.ndarray) and got.dtype == value.dtype and got.shape == value.shape, name
         assert got.tobytes() == value.tobytes(), name
     with h5py.File(path, "r") as f:
-        assert f.attrs["format"] == "socbjax.checkpoint" and f.attrs["format_version"] == 2
+        assert f.attrs["format"].decode() == "socbjax.checkpoint" and f.attrs["format_version"] == 2
     with pytest.raises(ValueError, match="socbjax.checkpoint file"):
         sj.load(path)
 
@@ -257,3 +270,223 @@ def test_reads_format_version_1_results(tmp_path):
         f.attrs["status"] = 6  # MAX_STEPS in socbjax 0.1
         del f["network/couples"], f["network/leaving_segment"]
     assert_results_equal(result, sj.load(path))
+
+
+# ----------------------------------------------------------------------------- output targets and failing disks
+
+REPO = Path(__file__).resolve().parents[1]
+
+
+def run_child(code: str, *args) -> subprocess.CompletedProcess:
+    return subprocess.run([sys.executable, "-c", code, *map(str, args)], check=False, capture_output=True, text=True, cwd=REPO,
+                          timeout=300)
+
+
+def writers(result):
+    return {
+        "save": lambda p: sj.save(result, p),
+        "save_checkpoint": lambda p: sj.save_checkpoint(p, {"a": np.arange(3)}, {}),
+        "atomic_path": lambda p: atomic_path(p, lambda tmp: tmp.write_text("x")),
+        "check_output_path": lambda p: check_output_path(p, "--out"),
+    }
+
+
+def test_special_targets_refused_and_left_alone(tmp_path):
+    fifo, folder, link = tmp_path / "fifo.h5", tmp_path / "folder.h5", tmp_path / "link.h5"
+    os.mkfifo(fifo)
+    folder.mkdir()
+    link.symlink_to(fifo)
+    for name, write in writers(make_result()).items():
+        for target, words in ((fifo, "is a FIFO"), (link, "is a FIFO"), (folder, "is a folder; give a file name")):
+            with pytest.raises(ValueError, match=words) as info:
+                write(target)
+            assert str(target) in str(info.value)
+            assert str(info.value).startswith("--out " if name == "check_output_path" else f"{name.replace('atomic_', 'output ')} ")
+    assert stat.S_ISFIFO(os.stat(fifo).st_mode) and link.is_symlink() and folder.is_dir() and not any(folder.iterdir())
+    assert sorted(os.listdir(tmp_path)) == ["fifo.h5", "folder.h5", "link.h5"]  # no temporary files
+
+
+def test_device_node_target_refused(tmp_path):
+    node = tmp_path / "null"
+    try:  # a private node with /dev/null's numbers: never the real /dev
+        os.mknod(node, stat.S_IFCHR | 0o666, os.makedev(1, 3))
+    except (PermissionError, OSError) as err:
+        pytest.skip(f"cannot create a device node here ({err})")
+    for write in writers(make_result()).values():
+        with pytest.raises(ValueError, match="character device"):
+            write(node)
+    assert stat.S_ISCHR(os.stat(node).st_mode)
+
+
+def test_check_output_path_messages(tmp_path):
+    target = tmp_path / "run.h5"
+    assert check_output_path(str(target), "--out") == target
+    assert os.listdir(tmp_path) == []  # the probe file is removed, the target not created
+    with pytest.raises(FileNotFoundError) as info:
+        check_output_path(tmp_path / "missing" / "run.h5", "--out")
+    assert str(info.value).startswith(f"--out {tmp_path / 'missing' / 'run.h5'}") and "mkdir" in str(info.value)
+    assert info.value.errno == errno.ENOENT
+    (tmp_path / "plain").write_text("")
+    with pytest.raises(ValueError, match=r"^--out .*plain is not a folder"):
+        check_output_path(tmp_path / "plain" / "run.h5", "--out")
+    with pytest.raises(ValueError, match=r"^--out .* is a folder; give a file name"):
+        check_output_path(tmp_path, "--out")
+
+
+def test_unwritable_folder_refused_before_any_work(tmp_path, monkeypatch):
+    calls = []
+    monkeypatch.setattr(h5py.Group, "create_dataset", lambda *a, **k: calls.append(a))
+
+    def read_only(*args, **kwargs):  # what a read-only mount answers (chmod cannot stop root)
+        raise OSError(errno.EROFS, "Read-only file system")
+
+    monkeypatch.setattr(tempfile, "mkstemp", read_only)
+    for name, write in writers(make_result()).items():
+        with pytest.raises(OSError) as info:
+            write(tmp_path / "run.h5")
+        if name == "check_output_path":
+            assert str(info.value).startswith("--out ")
+        assert isinstance(info.value, PermissionError) and str(tmp_path / "run.h5") in str(info.value)
+        assert "writ" in str(info.value)
+    assert calls == [] and os.listdir(tmp_path) == []
+
+
+def test_read_only_folder(tmp_path):
+    folder = tmp_path / "ro"
+    folder.mkdir()
+    folder.chmod(0o555)
+    try:
+        try:
+            (folder / "probe").write_text("x")
+        except PermissionError:
+            pass
+        else:
+            pytest.skip("running as root: the folder's mode does not stop writes")
+        with pytest.raises(PermissionError, match=r"^--out .*choose a writable folder"):
+            check_output_path(folder / "run.h5", "--out")
+        with pytest.raises(PermissionError, match="ro"):
+            sj.save(make_result(), folder / "run.h5")
+    finally:
+        folder.chmod(0o755)
+
+
+def test_io_error_while_writing_names_target_and_keeps_previous(tmp_path, monkeypatch):
+    path = sj.save(make_result(seed=1), tmp_path / "run.h5")
+    before = path.read_bytes()
+
+    def failing_fsync(fd):
+        raise OSError(errno.EIO, "Input/output error")
+
+    monkeypatch.setattr(os, "fsync", failing_fsync)
+    with pytest.raises(OSError) as info:
+        sj.save(make_result(seed=2), path)
+    assert info.value.errno == errno.EIO and f"cannot write {path}" in str(info.value)
+    with pytest.raises(OSError, match="No space left") as info:
+        atomic_path(path, lambda tmp: (_ for _ in ()).throw(OSError(errno.ENOSPC, "No space left on device")))
+    assert str(path) in str(info.value) and "free disk space" in str(info.value)
+    monkeypatch.undo()
+    assert path.read_bytes() == before and tmp_files(tmp_path) == []
+
+
+DISK_FULL_CHILD = r"""
+import json, resource, signal, sys
+import numpy as np
+import socbjax as sj
+big, run, ck, limit = sys.argv[1:5]
+result = sj.load(big)
+signal.signal(signal.SIGXFSZ, signal.SIG_IGN)  # the write then fails with EFBIG instead of killing the process
+resource.setrlimit(resource.RLIMIT_FSIZE, (int(limit), int(limit)))
+out = {}
+for name, save in [("result", lambda: sj.save(result, run)),
+                   ("checkpoint", lambda: sj.save_checkpoint(ck, {"x": np.random.default_rng(0).normal(size=10**5)},
+                                                             {"i": 2}))]:
+    try:
+        save()
+        out[name] = "saved"
+    except OSError as err:
+        out[name] = [err.errno, str(err)]
+print(json.dumps(out))
+"""
+
+
+def test_file_size_limit_during_writes_is_a_clean_oserror(tmp_path):
+    """A disk filling mid-write (here RLIMIT_FSIZE) once crashed the process inside h5py."""
+    folder = tmp_path / "out"
+    folder.mkdir()
+    big = sj.save(make_result(K=400, N=12), tmp_path / "big.h5")
+    run, ck = sj.save(make_result(seed=3), folder / "run.h5"), sj.save_checkpoint(folder / "ck.h5", {"x": np.arange(3)}, {})
+    before = {p: p.read_bytes() for p in (run, ck)}
+    limit = 64 * 1024
+    assert big.stat().st_size > limit
+    child = run_child(DISK_FULL_CHILD, big, run, ck, limit)
+    assert child.returncode == 0, (child.returncode, child.stderr[-2000:])  # < 0 would be a signal (SIGSEGV, SIGXFSZ)
+    out = json.loads(child.stdout.strip().splitlines()[-1])
+    for name, path in (("result", run), ("checkpoint", ck)):
+        code, message = out[name]
+        assert code == errno.EFBIG and f"cannot write {path}" in message and "unchanged" in message, message
+        assert path.read_bytes() == before[path]
+    assert sorted(os.listdir(folder)) == ["ck.h5", "run.h5"]  # no .tmp left
+
+
+LOCK_CHILD = r"""
+import json, sys
+from socbjax._io import output_lock
+try:
+    with output_lock(sys.argv[1]):
+        print(json.dumps(["acquired", ""]))
+except OSError as err:
+    print(json.dumps([err.errno, str(err)]))
+"""
+
+
+def test_output_lock_excludes_a_second_process(tmp_path):
+    target, lock = tmp_path / "run.h5", tmp_path / ".run.h5.lock"
+    with output_lock(target) as held:
+        assert held == target and lock.read_text().strip() == str(os.getpid())
+        child = run_child(LOCK_CHILD, target)
+        assert child.returncode == 0, child.stderr[-2000:]
+        code, message = json.loads(child.stdout.strip().splitlines()[-1])
+        assert code == errno.EBUSY and f"another socbjax run is writing this output (pid {os.getpid()})" in message
+        assert str(target) in message
+        with pytest.raises(OSError) as info, output_lock(target):  # flock: another open file, same process
+            pass
+        assert info.value.errno == errno.EBUSY
+    assert not lock.exists()
+    with output_lock(target):  # free again once released
+        assert lock.exists()
+    assert not lock.exists()
+
+
+def test_output_lock_survives_the_release_race(tmp_path, monkeypatch):
+    """A contender opens the lock file, the holder then removes it and releases, and only then
+    does the contender's flock succeed, on a file no longer at the path: it must notice and
+    start over, else a third process would lock a new file and two would write at once."""
+    target, holder = tmp_path / "run.h5", contextlib.ExitStack()
+    holder.enter_context(output_lock(target))
+    real_flock, calls = fcntl.flock, []
+
+    def flock_after_release(fd, operation):
+        if not calls:
+            holder.close()  # between the contender's open and its flock
+        calls.append(fd)
+        return real_flock(fd, operation)
+
+    monkeypatch.setattr(fcntl, "flock", flock_after_release)
+    with output_lock(target):
+        assert len(calls) == 2  # the first lock was on the removed file: retried on a new one
+        with pytest.raises(OSError) as info, output_lock(target):
+            pass
+        assert info.value.errno == errno.EBUSY
+    assert not (tmp_path / ".run.h5.lock").exists()
+
+
+def test_load_never_turns_interrupts_into_value_errors(tmp_path, monkeypatch):
+    path = sj.save(make_result(), tmp_path / "run.h5")
+
+    def interrupted(*args):
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(h5py.Dataset, "__getitem__", interrupted)
+    with pytest.raises(KeyboardInterrupt):
+        sj.load(path)
+

@@ -68,7 +68,7 @@ def test_junction_system_is_square(dim):
 @pytest.mark.parametrize("kink_deg", [30.0, -50.0])
 def test_kinked_cantilever_matches_the_elastica_with_a_corner(dim, kink_deg):
     L1, L2, EI = 1.0, 0.6, 1.0
-    net, J, D = branched_cantilever(dim, n_mother=4, mother_length=L1, angle_deg=kink_deg, daughter_length=L2, n_daughter=3, EI=EI, at_tip=True)
+    net, _J, _D = branched_cantilever(dim, n_mother=4, mother_length=L1, angle_deg=kink_deg, daughter_length=L2, n_daughter=3, EI=EI, at_tip=True)
     force2 = np.array([0.4, -1.5])
     force = np.zeros(dim)
     force[:2] = force2
@@ -89,8 +89,8 @@ def test_junction_validation_errors():
     fixed = [np.eye(2)] + [np.zeros((0, 2))] * (len(pos) - 1)
     clamped = np.zeros(len(pos), bool)
     clamped[0] = True
-    kw = dict(fixed_directions=fixed, clamped=clamped)
-    with pytest.raises(ValueError, match="does not exist"):
+    kw = {"fixed_directions": fixed, "clamped": clamped}
+    with pytest.raises(ValueError, match="attach has the node index 99, outside the valid range"):
         sj.make_network(pos, tan, segs, lengths, 1.0, attach=[(J, 99)], **kw)
     with pytest.raises(ValueError, match="duplicate junction"):
         sj.make_network(pos, tan, segs, lengths, 1.0, attach=[(J, D), (2, D)], **kw)

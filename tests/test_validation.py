@@ -153,3 +153,17 @@ def test_buckling_load_reports_its_status_and_refuses_networks_that_are_not_colu
     assert abs(P - np.pi**2) / np.pi**2 < 5e-4
     with pytest.raises(ValueError, match="straight column"):
         sj.buckling_load(sj.dendritic_outcrop(generations=2))
+
+
+def test_buckling_load_refuses_what_has_no_column_buckling_load():
+    """Networks and columns whose loaded end is held axially get a clear
+    ValueError (not a number such as 5e-16 pN, nor a LinAlgError)."""
+    with pytest.raises(ValueError, match="straight column"):
+        sj.buckling_load(sj.unit_dendritic_mesh(dim=2))
+    free = [np.zeros((0, 2))] * 3
+    column = sj.column(5, supports=("clamped", "clamped"), dim=2)
+    held = sj.make_network(np.asarray(column.positions), np.asarray(column.tangents), column.segments,
+                           np.asarray(column.lengths), 1.0, fixed_directions=[np.eye(2), *free, np.eye(2)],
+                           clamped=[True, False, False, False, True])
+    with pytest.raises(ValueError, match="held along the column axis"):
+        sj.buckling_load(held)

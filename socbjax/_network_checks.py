@@ -1,0 +1,292 @@
+"""Validation of :func:`socbjax.make_network`'s inputs (host side, before anything is traced).
+
+Topology arguments (segments, supports, junctions, probe, strand ids) must be concrete;
+values (positions, tangents, lengths, EI, loads, couples) may be JAX tracers, and the checks
+that need them are then skipped.  With concrete values the reference state must be the
+straight, stress-free state of every strand, to the relative tolerance
+``socbjax._checks.GEOMETRY_RTOL`` (1e-6, plus the round-off of the node coordinates):
+
+* tangents are unit vectors (tangents within the tolerance are normalised exactly);
+* every segment's chord is non-zero, its length equals the chord and the tangents at both
+  its nodes point along the chord (segments run from their first to their second node);
+* segments and junctions form no closed loop (a network is a forest of open strands), every
+  node lies on one or two segments, and at most one segment starts and one ends at a node;
+* index arrays (segments, attach, probe, strand) hold integers: booleans and floats are
+  refused (``TypeError``), never truncated; out-of-range values (e.g. 2**33) are a
+  ``ValueError`` naming the argument.
+
+Units: µm, pN, pN·µm², degrees for angles.
+"""
+
+from __future__ import annotations
+
+import jax.numpy as jnp
+import numpy as np
+
+from ._checks import (
+    GEOMETRY_RTOL,
+    MAX_INT32,
+    check_array,
+    check_index_array,
+    check_positive_array,
+    describe,
+    is_traced,
+)
+
+__all__ = [
+    "check_degrees",
+    "check_loops",
+    "check_reference_state",
+    "check_segments",
+    "check_supported",
+    "concrete_structure",
+    "network_value",
+    "node_flags",
+    "probe_mask",
+    "projectors",
+    "strand_ids",
+    "unit_tangents",
+]
+
+_EPS = np.finfo(np.float64).eps
+
+
+def concrete_structure(name: str, value):
+    """``value``; a traced JAX value is refused: it would fix the compiled program."""
+    if is_traced(value):
+        raise TypeError(
+            f"{name} fixes the network's topology and must be concrete (numpy or Python values), not a traced JAX "
+            "value: build the structure outside jax.jit/grad/vmap; only the values positions, tangents, lengths, EI, "
+            "loads and couples may be traced"
+        )
+    return value
+
+
+def network_value(name: str, value, shape: tuple, unit: str, *, positive: bool = False):
+    """(array of ``shape``, concrete numpy copy or None when traced); scalars broadcast.
+
+    Concrete values stay numpy arrays in the network: inside ``jax.jit`` even
+    ``jnp.asarray`` of a constant is a tracer, and the host-side logic that needs concrete
+    geometry (probe placement, input checks) must still see it."""
+    if value is None:
+        return np.zeros(shape), np.zeros(shape)
+    arr = (check_positive_array if positive else check_array)(name, value, unit)
+    if is_traced(arr):
+        if arr.ndim == 0 or (arr.ndim == 1 and len(shape) == 1 and arr.shape == (1,)):
+            arr = jnp.broadcast_to(arr, shape)
+        if arr.shape != shape:
+            raise ValueError(f"{name} must have shape {shape} ({unit}), got {arr.shape}")
+        return arr, None
+    if arr.ndim == 0:
+        arr = np.broadcast_to(arr, shape)
+    if arr.shape != shape:
+        raise ValueError(f"{name} must have shape {shape} ({unit}), got {arr.shape}")
+    arr = np.array(arr, copy=True)
+    return arr, arr
+
+
+def check_segments(segments, n: int) -> np.ndarray:
+    """[S, 2] int32 (start, end) node indices: distinct nodes, no duplicate segment."""
+    seg = check_index_array("segments", concrete_structure("segments", segments), n)
+    if seg.size == 0 or seg.ndim != 2 or seg.shape[1] != 2:
+        raise ValueError(f"segments must have shape [S, 2] with S >= 1 (pairs of node indices), got shape {seg.shape}")
+    same = seg[:, 0] == seg[:, 1]
+    if same.any():
+        k = int(np.argmax(same))
+        raise ValueError(f"segment {k} joins node {seg[k, 0]} to itself; each segment needs two distinct nodes")
+    pairs = np.sort(seg, axis=1)
+    if len(np.unique(pairs, axis=0)) != len(pairs):
+        raise ValueError("two segments join the same pair of nodes (duplicate segment)")
+    return seg.astype(np.int32)
+
+
+def unit_tangents(tangents: np.ndarray) -> np.ndarray:
+    """Concrete tangents [N, d] checked to be unit vectors within ``GEOMETRY_RTOL``; those off
+    by more than round-off are normalised (the others are returned bit for bit)."""
+    norm = np.linalg.norm(tangents, axis=1)
+    zero = norm < 1e-12
+    if zero.any():
+        i = int(np.argmax(zero))
+        raise ValueError(f"tangents[{i}] is the zero vector {tangents[i].tolist()}; every node needs the unit tangent "
+                         "of its segment(s) (the direction from the segment's first node to its second)")
+    off = np.abs(norm - 1.0) > GEOMETRY_RTOL
+    if off.any():
+        i = int(np.argmax(off))
+        raise ValueError(f"tangents[{i}] has length {norm[i]:.9g}, not 1: tangents must be unit vectors (to "
+                         f"{GEOMETRY_RTOL:g}); normalise them, e.g. t / np.linalg.norm(t, axis=1, keepdims=True)")
+    rounding = np.abs(norm - 1.0) > 4 * _EPS
+    return np.where(rounding[:, None], tangents / norm[:, None], tangents)
+
+
+def check_reference_state(positions, tangents, segments: np.ndarray, lengths) -> None:
+    """The straight, stress-free reference state, for whichever of ``positions``,
+    ``tangents`` [N, d] and ``lengths`` [S] are concrete (None: traced, skipped)."""
+    if positions is None:
+        return
+    vec = positions[segments[:, 1]] - positions[segments[:, 0]]
+    chord = np.linalg.norm(vec, axis=1)
+    roundoff = 64 * _EPS * max(float(np.max(np.abs(positions))), 1.0)  # coordinate round-off (µm)
+    floor = np.maximum(1e-9 * np.maximum(chord if lengths is None else lengths, 1.0), roundoff)
+    coincident = chord <= floor
+    if coincident.any():
+        k = int(np.argmax(coincident))
+        raise ValueError(f"positions of segment {k}'s end nodes {segments[k].tolist()} coincide at "
+                         f"{positions[segments[k, 0]].tolist()} (a zero-length segment); move, merge or remove them")
+    if lengths is not None:
+        off = np.abs(chord - lengths) > GEOMETRY_RTOL * lengths + roundoff
+        if off.any():
+            k = int(np.argmax(off))
+            raise ValueError(
+                f"lengths[{k}] = {lengths[k]:.9g} µm differs from the distance {chord[k]:.9g} µm between its nodes "
+                f"{segments[k].tolist()}: the reference state must be straight and stress-free, so each segment's "
+                f"length must equal its chord (relative tolerance {GEOMETRY_RTOL:g})")
+    if tangents is not None:
+        _check_tangents_along_chords(tangents, segments, vec / chord[:, None], GEOMETRY_RTOL + roundoff / chord)
+
+
+def _check_tangents_along_chords(tangents, segments, unit_chord, tol) -> None:
+    for end in (0, 1):
+        nodes = segments[:, end]
+        err = np.linalg.norm(tangents[nodes] - unit_chord, axis=1)
+        bad = err > tol
+        if bad.any():
+            k = int(np.argmax(bad))
+            i = int(nodes[k])
+            angle = np.degrees(np.arccos(np.clip(tangents[i] @ unit_chord[k], -1.0, 1.0)))
+            raise ValueError(
+                f"tangents[{i}] = {np.round(tangents[i], 9).tolist()} is at {angle:.6g}° to segment {k}'s chord "
+                f"(nodes {segments[k].tolist()}, direction {np.round(unit_chord[k], 9).tolist()}): in the straight, "
+                "stress-free reference state the tangents at both ends of a segment point along its chord, from its "
+                "first node to its second")
+
+
+def check_degrees(segments: np.ndarray, n: int) -> tuple[np.ndarray, np.ndarray]:
+    """[N] numbers of segments starting and ending at each node: every node on one or two
+    segments, and strands run base to tip (at most one segment starts and one ends at a node)."""
+    n_start, n_end = np.bincount(segments[:, 0], minlength=n), np.bincount(segments[:, 1], minlength=n)
+    degree = n_start + n_end
+    if np.any(degree == 0):
+        raise ValueError(f"node {int(np.argmax(degree == 0))} belongs to no segment; remove it (segments must use "
+                         "every node)")
+    if np.any(degree > 2):
+        raise ValueError(f"node {int(np.argmax(degree > 2))} is shared by more than two segments; join filaments with "
+                         "branch junctions (attach=[(mother, daughter_base), ...]) instead")
+    for count, what in ((n_start, "start"), (n_end, "end")):
+        bad = count > 1
+        if bad.any():
+            raise ValueError(f"segments: {int(count.max())} segments {what} at node {int(np.argmax(bad))}; segments run "
+                             "along their strand from base to tip (each node starts and ends at most one): reverse one")
+    return n_start, n_end
+
+
+def node_flags(name: str, value, n: int) -> np.ndarray:
+    """[N] bool flags (True/False, or integers 0/1) or all False for None."""
+    if value is None:
+        return np.zeros(n, bool)
+    arr = np.asarray(concrete_structure(name, value))
+    if arr.shape != (n,):
+        raise ValueError(f"{name} must have one entry per node ({n}), got shape {arr.shape}")
+    if arr.dtype.kind == "b":
+        return arr.astype(bool)
+    if arr.dtype.kind not in "iu":
+        raise TypeError(f"{name} must hold booleans (one per node), got dtype {arr.dtype}: {describe(value)}")
+    if not np.all((arr == 0) | (arr == 1)):
+        raise ValueError(f"{name} must hold booleans or 0/1 (one per node), got {describe(value)}")
+    return arr.astype(bool)
+
+
+def strand_ids(strand, s: int) -> np.ndarray:
+    """[S] int32 strand ids (non-negative integers); all 0 for None."""
+    if strand is None:
+        return np.zeros(s, np.int32)
+    arr = check_index_array("strand", concrete_structure("strand", strand), MAX_INT32 + 1, what="strand id")
+    if arr.shape != (s,):
+        raise ValueError(f"strand must have one id per segment ({s}), got shape {arr.shape}")
+    return arr.astype(np.int32)
+
+
+def projectors(fixed_directions, n: int, dim: int) -> np.ndarray:
+    """[N, d, d] orthogonal projectors onto the span of each node's fixed directions."""
+    projector = np.zeros((n, dim, dim))
+    if fixed_directions is None:
+        return projector
+    concrete_structure("fixed_directions", fixed_directions)
+    if isinstance(fixed_directions, (str, bytes)) or not hasattr(fixed_directions, "__len__"):
+        raise TypeError(f"fixed_directions must be a list with one array [k, {dim}] per node, got "
+                        f"{describe(fixed_directions)}")
+    if len(fixed_directions) != n:
+        raise ValueError(f"fixed_directions needs one entry per node ({n}), got {len(fixed_directions)}")
+    for i, dirs in enumerate(fixed_directions):
+        projector[i] = _projector(f"fixed_directions[{i}]", dirs, dim)
+    return projector
+
+
+def _projector(name: str, dirs, dim: int) -> np.ndarray:
+    if isinstance(dirs, np.ndarray) and dirs.size == 0 and dirs.dtype.kind in "iuf":  # a free node (fast path)
+        return np.zeros((dim, dim))
+    dirs = check_array(name, dirs, "direction vectors")
+    if dirs.size == 0:
+        return np.zeros((dim, dim))
+    dirs = dirs[None] if dirs.ndim == 1 else dirs
+    if dirs.ndim != 2 or dirs.shape[1] != dim:
+        raise ValueError(f"{name} must be an array [k, {dim}] of directions (k = 0 free, np.eye({dim}) fixed), got "
+                         f"shape {dirs.shape}")
+    norms = np.linalg.norm(dirs, axis=1)
+    if np.any(norms < 1e-12):
+        raise ValueError(f"{name} row {int(np.argmax(norms < 1e-12))} is the zero vector, which is no direction; "
+                         f"give non-zero directions (np.zeros((0, {dim})) for a free node)")
+    q, r = np.linalg.qr(dirs.T)
+    if len(dirs) > dim or np.any(np.abs(np.diag(r)) <= 1e-9 * norms.max()):
+        # linearly dependent rows: their span (the QR basis would add spurious directions)
+        u, sv, _ = np.linalg.svd((dirs / norms[:, None]).T)
+        q = u[:, : int(np.sum(sv > 1e-9))]
+    return q @ q.T
+
+
+def probe_mask(probe, n: int) -> np.ndarray:
+    """[N] bool: the probe nodes (indices, negative ones counted from the end)."""
+    mask = np.zeros(n, bool)
+    if probe is None:
+        return mask
+    mask[check_index_array("probe", concrete_structure("probe", probe), n, allow_negative=True).ravel()] = True
+    return mask
+
+
+def check_loops(n: int, segments: np.ndarray, attach: np.ndarray) -> np.ndarray:
+    """[N] root node of each node's connected piece (segments and junctions); a segment or
+    junction that joins two nodes already connected closes a loop and is refused."""
+    parent = np.arange(n)
+
+    def find(i):
+        while parent[i] != i:
+            parent[i] = parent[parent[i]]
+            i = parent[i]
+        return i
+
+    edges = [(f"segments[{k}]", a, b) for k, (a, b) in enumerate(segments.tolist())]
+    edges += [(f"the junction attach ({attach[i]}, {i})", int(attach[i]), int(i))
+              for i in np.flatnonzero(attach != np.arange(n))]
+    for what, a, b in edges:
+        ra, rb = find(a), find(b)
+        if ra == rb:
+            raise ValueError(f"{what} closes a loop (nodes {a} and {b} are already connected through other segments "
+                             "or junctions); filament networks are trees of open strands: remove a segment or junction")
+        parent[ra] = rb
+    return np.array([find(i) for i in range(n)])
+
+
+def check_supported(roots: np.ndarray, clamped, projector, dim) -> None:
+    """Every connected piece (nodes sharing a root of :func:`check_loops`) held against
+    rigid-body motion: one clamped fixed node, or enough pinned ones."""
+    rank = np.einsum("nii->n", projector).round().astype(int)
+    for root in np.unique(roots):
+        members = roots == root
+        held = np.any(clamped[members] & (rank[members] >= dim)) or (
+            np.sum(rank[members] > 0) >= 2 and np.sum(np.minimum(rank[members], dim)) >= dim + 1
+        )
+        if not held:
+            nodes = np.flatnonzero(members)
+            raise ValueError(
+                f"the piece of the network with nodes {nodes[:8].tolist()}{'...' if len(nodes) > 8 else ''} is not held "
+                "against rigid-body motion; clamp one of its nodes or pin at least two"
+            )
