@@ -162,8 +162,8 @@ def check_array(name: str, value, unit: str):
     bad = ~np.isfinite(arr)
     if bad.any():
         where = np.unravel_index(int(np.argmax(bad)), arr.shape) if arr.ndim else ()
-        raise ValueError(f"{name} must be finite ({unit}), without NaN or infinite values; entry "
-                         f"{[int(i) for i in where]} is {arr[where]}")
+        raise ValueError(f"{name} must be finite ({unit}), without NaN or infinite values; {_entry(where)} "
+                         f"{arr[where]}")
     return arr
 
 
@@ -176,8 +176,13 @@ def check_positive_array(name: str, value, unit: str, *, allow_zero: bool = Fals
     if bad.any():
         where = np.unravel_index(int(np.argmax(bad)), arr.shape) if arr.ndim else ()
         kind = "non-negative" if allow_zero else "positive"
-        raise ValueError(f"{name} must be {kind} ({unit}); entry {[int(i) for i in where]} is {arr[where]:g}")
+        raise ValueError(f"{name} must be {kind} ({unit}); {_entry(where)} {arr[where]:g}")
     return arr
+
+
+def _entry(where: tuple) -> str:
+    """"got" for a scalar, "entry [i, ...] is" for an array element."""
+    return f"entry {[int(i) for i in where]} is" if where else "got"
 
 
 def check_vector(name: str, value, dim: int, unit: str = "", *, nonzero: bool = False) -> np.ndarray:

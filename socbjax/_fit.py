@@ -152,6 +152,7 @@ class FitResult(eqx.Module):
     def to_dict(self) -> dict:
         out = {f.name: getattr(self, f.name) for f in dataclasses.fields(self) if f.name != "result"}
         out["result"] = result_name(self.result)
+        out["r_squared"] = self.r_squared if math.isfinite(self.r_squared) else None  # valid JSON (no -Infinity)
         for key in ("correlation", "covariance", "compression", "force", "model_force"):
             out[key] = np.asarray(out[key]).tolist()
         out["residuals"] = self.residuals.tolist()

@@ -6,6 +6,7 @@ Units everywhere: µm, pN, s; EI in pN·µm²; angles in degrees on the command 
 from __future__ import annotations
 
 import argparse
+import math
 import signal
 import sys
 from pathlib import Path
@@ -203,6 +204,10 @@ def _simulate(args) -> int:
 
     out = Path(args.out).expanduser()
     checkpoint = out.with_name(out.name + ".ckpt.h5")
+    if args.max_step is not None and not (math.isfinite(args.max_step) and args.max_step > 0):
+        raise ValueError(f"--max-step must be a positive finite step in µm, got {args.max_step}")
+    if args.checkpoint_every < 1:
+        raise ValueError(f"--checkpoint-every must be a positive number of steps, got {args.checkpoint_every}")
     _check_outputs(args, out, checkpoint)
     net, params, default_u = _build(args)
     displacement = default_u if args.displacement is None else args.displacement

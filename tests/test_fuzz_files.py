@@ -4,7 +4,8 @@ read of another file), and whatever loads can be plotted."""
 
 import json
 import os
-import time
+import subprocess
+import sys
 
 import h5py
 import numpy as np
@@ -299,10 +300,7 @@ def crafted(tmp_path, content: bytes, edit) -> os.PathLike:
 @pytest.mark.parametrize("dim", [2, 3])
 @pytest.mark.parametrize("name, make, words", CRAFTED, ids=[c[0] for c in CRAFTED])
 def test_crafted_result_refused(tmp_path, files, dim, name, make, words):
-    path = crafted(tmp_path, files[dim], make(files))
-    start = time.perf_counter()
-    assert_refused(path, *words)
-    assert time.perf_counter() - start < 1.0  # refused from the metadata, nothing allocated
+    assert_refused(crafted(tmp_path, files[dim], make(files)), *words)  # from the metadata, nothing read
 
 
 @pytest.mark.parametrize("name, edit, words", VERSION_1, ids=[c[0] for c in VERSION_1])
@@ -317,10 +315,7 @@ def test_crafted_format_1_result_refused(tmp_path, files, name, edit, words):
 
 @pytest.mark.parametrize("name, make, words", CHECKPOINT, ids=[c[0] for c in CHECKPOINT])
 def test_crafted_checkpoint_refused(tmp_path, files, name, make, words):
-    path = crafted(tmp_path, files["ck"], make(files))
-    start = time.perf_counter()
-    assert_refused(path, *words, checkpoint=True)
-    assert time.perf_counter() - start < 1.0
+    assert_refused(crafted(tmp_path, files["ck"], make(files)), *words, checkpoint=True)
 
 
 @pytest.mark.parametrize("make", [external_storage, virtual, external_link], ids=["storage", "virtual", "link"])
@@ -448,9 +443,11 @@ def test_damaged_global_heap_refused_instead_of_hanging(tmp_path, files):
     assert p < end
     content[p + 8:p + 16] = bytes(8)
     path.write_bytes(bytes(content))
-    start_time = time.perf_counter()
-    assert_refused(path, "global heap", "loop forever")
-    assert time.perf_counter() - start_time < 1.0
+    # in a child process with a timeout: a regression hangs inside HDF5, where no test could stop it
+    code = "import sys, socbjax as sj\ntry:\n sj.load(sys.argv[1])\nexcept ValueError as err:\n print(err)\n"
+    child = subprocess.run([sys.executable, "-c", code, str(path)], capture_output=True, text=True, timeout=120,
+                           check=False)
+    assert "global heap" in child.stdout and "loop forever" in child.stdout, child.stdout + child.stderr[-2000:]
     content[p + 8:p + 16] = (10**6).to_bytes(8, "little")  # an object running past its collection
     content[start + 16 + 8:start + 16 + 16] = (5000).to_bytes(8, "little")
     path.write_bytes(bytes(content))

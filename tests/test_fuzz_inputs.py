@@ -3,15 +3,14 @@ and solver argument raises ``TypeError`` (wrong type) or ``ValueError`` (wrong v
 anything is traced or compiled, and the message names the argument.
 
 ``refused`` checks all three: the exception type, the argument's name in the message, and
-that the call took under ``QUICK`` seconds without JAX tracing or compiling anything (JAX
-reports every trace and compilation to ``jax.monitoring``).  Hypothesis draws random bad
+that nothing was traced or compiled before the refusal (JAX reports every trace and
+compilation to ``jax.monitoring``).  Hypothesis draws random bad
 values per numeric argument; the explicit cases reproduce every case of the issue; valid
 inputs of every builder must still build.
 """
 
 import contextlib
 import math
-import time
 
 import jax
 import jax.numpy as jnp
@@ -22,7 +21,6 @@ from hypothesis import strategies as st
 
 import socbjax as sj
 
-QUICK = 1.5  # seconds: a refusal does host-side checks only
 FUZZ = settings(max_examples=25, deadline=None, derandomize=True, suppress_health_check=[HealthCheck.too_slow])
 
 
@@ -42,14 +40,11 @@ def jax_work():
 
 
 def refused(exc, name, fn, *args, **kwargs) -> str:
-    """``fn(*args, **kwargs)`` raises ``exc`` naming ``name``, quickly and before any JAX work."""
-    start = time.perf_counter()
+    """``fn(*args, **kwargs)`` raises ``exc`` naming ``name``, before any JAX work."""
     with jax_work() as events, pytest.raises(exc) as info:
         fn(*args, **kwargs)
-    elapsed = time.perf_counter() - start
     message = str(info.value)
     assert name in message, f"the message does not name {name!r}: {message}"
-    assert elapsed < QUICK, f"refused only after {elapsed:.2f} s: {message}"
     assert not events, f"JAX traced or compiled before refusing ({sorted(set(events))}): {message}"
     return message
 
