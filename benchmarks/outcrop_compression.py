@@ -54,7 +54,7 @@ def run(generations: int, displacement: float, max_step: float, repeat: bool = T
         "steps": result.n_steps,
         "newton_iterations": iterations,
         "completed": result.completed,
-        "path_followed": result.completed or result.result == sj.RESULTS.surface_crossed,
+        "path_followed": bool(result.completed or result.result == sj.RESULTS.surface_crossed),
         "status": result.status_message,
         "first_run_s": first,
         "wall_s": wall,

@@ -119,6 +119,8 @@ def is_native(path: Path) -> bool:
     suffix = path.suffix.lower()
     if suffix != ".txt":
         return suffix in NATIVE_SUFFIXES
+    if path.stat().st_size > MAX_TEXT_BYTES:  # read_native refuses it by name; never scan a huge first line
+        return True
     with path.open(encoding="utf-8-sig", errors="replace") as fh:
         header = next((ln for ln in fh if ln.strip() and not ln.lstrip().startswith("#")), "force_")
     return "force_" in header.lower()

@@ -102,7 +102,8 @@ class FitResult(eqx.Module):
         parameters (or started at a stationary point) and the model explains the data
         (R² > 0); ``message`` says why it stopped ("did not move ...", "hit the iteration
         budget ...", "not a fit: R² = ..." otherwise; ``result`` then is
-        ``RESULTS.did_not_move``, ``nonlinear_max_steps_reached`` or ``poor_fit``).
+        ``RESULTS.did_not_move``, ``nonlinear_max_steps_reached``, ``poor_fit``, or
+        ``nonlinear_divergence`` when the optimiser's step left the followable path).
     r_squared : 1 − Σ(model − data)² / Σ(data − mean)² over the fitted points.
     identifiable : False when two free parameters are (nearly) perfectly correlated or JᵀJ is
         singular — then the values are not determined by the data (see ``warnings``).
@@ -152,18 +153,27 @@ class FitResult(eqx.Module):
     def to_dict(self) -> dict:
         out = {f.name: getattr(self, f.name) for f in dataclasses.fields(self) if f.name != "result"}
         out["result"] = result_name(self.result)
-        out["r_squared"] = self.r_squared if math.isfinite(self.r_squared) else None  # valid JSON (no -Infinity)
         for key in ("correlation", "covariance", "compression", "force", "model_force"):
             out[key] = np.asarray(out[key]).tolist()
         out["residuals"] = self.residuals.tolist()
-        return json.loads(json.dumps(out, default=float))
+        return _finite_json(json.loads(json.dumps(out, default=float)))
 
     def save(self, path) -> None:
         """Write the result as JSON, atomically (temporary file, then rename)."""
         from ._io import atomic_path
 
-        text = json.dumps(self.to_dict(), indent=2)
+        text = json.dumps(self.to_dict(), indent=2, allow_nan=False)
         atomic_path(path, lambda tmp: tmp.write_text(text))
+
+
+def _finite_json(value):
+    """``value`` with every non-finite float replaced by None: strict JSON (no NaN or
+    Infinity, e.g. the standard errors of a singular fit)."""
+    if isinstance(value, dict):
+        return {k: _finite_json(v) for k, v in value.items()}
+    if isinstance(value, list):
+        return [_finite_json(v) for v in value]
+    return None if isinstance(value, float) and not math.isfinite(value) else value
 
 
 class _Progress:
@@ -364,17 +374,24 @@ def fit(curve, model="unit-mesh", *, free=("EI",), fixed: dict | None = None, in
     return _result(problem, settings, jac, z, history, converged, message, evaluations, bar, t0, loss0)
 
 
-def _status(converged: bool, message: str, loss0: float, loss: float, r_squared: float):
+def _stationary(J: np.ndarray, r: np.ndarray) -> bool:
+    """The residual is (numerically) orthogonal to every Jacobian column: a least-squares
+    stationary point, whatever the optimiser (cosines below 1e-3)."""
+    norms = np.linalg.norm(J, axis=0) * np.linalg.norm(r)
+    return bool(np.all(np.abs(J.T @ r) <= 1e-3 * np.where(norms > 0, norms, 1.0)))
+
+
+def _status(converged: bool, message: str, moved: bool, stationary: bool, r_squared: float):
     """(result, message): "converged" only when the optimiser met its tolerance, the
     parameters moved (or the start already was stationary) and the model explains the data."""
-    stationary_start = message.startswith("converged (gradient")
-    moved = loss < loss0 * (1.0 - 1e-12)
     if not r_squared > 0.0:
         return RESULTS.poor_fit, f"not a fit: R² = {r_squared:.3g} ({message})"
-    if not moved and not stationary_start:
+    if not moved and not stationary:
         return RESULTS.did_not_move, f"did not move from the initial values ({message})"
-    if not converged:
+    if not converged and message.startswith("reached max_iterations"):
         return RESULTS.nonlinear_max_steps_reached, f"hit the iteration budget: {message}"
+    if not converged:
+        return RESULTS.nonlinear_divergence, message
     return RESULTS.successful, message
 
 
@@ -392,13 +409,14 @@ def _result(problem, settings, jac, z, history, converged, message, evaluations,
     weighted, r = r, r * problem.sigma  # back to pN
     spread = float(np.sum((problem.force - problem.force.mean()) ** 2))
     r_squared = 1.0 - float(r @ r) / spread if spread > 0 else -math.inf
-    result, message = _status(converged, message, loss0, 0.5 * float(weighted @ weighted), r_squared)
+    moved = 0.5 * float(weighted @ weighted) < loss0 * (1.0 - 1e-12)
+    result, message = _status(converged, message, moved, _stationary(J, weighted), r_squared)
     if result != RESULTS.successful:
         warnings = [f"{message}: {RESULTS[result]}"] + warnings
     return FitResult(
         model=problem.model.name, names=free, values=values, standard_errors=dict(zip(free, map(float, se))),
         correlation=corr, covariance=cov, loss=0.5 * float(weighted @ weighted), rms=float(np.sqrt(np.mean(r**2))),
-        converged=result == RESULTS.successful, message=message, identifiable=identifiable, warnings=warnings,
+        converged=bool(result == RESULTS.successful), message=message, identifiable=identifiable, warnings=warnings,
         history=history, r_squared=r_squared,
         compression=problem.compression, force=problem.force, model_force=problem.force + r,
         units={n: table[n].unit for n in values}, optimizer=settings.optimizer, n_evaluations=int(evaluations) + 1,

@@ -166,7 +166,7 @@ class Reader:
 
     def check_tree(self) -> dict[str, dict[str, h5py.Dataset]]:
         """Check every object (see the class docstring); returns ``datasets``."""
-        total = 0
+        total = stored_total = 0
         for gname in self._names(self.file, "/"):
             if gname not in self.groups:
                 raise InvalidFile(f"/{gname} is not part of the layout (expected only {sorted(self.groups)})")
@@ -175,8 +175,12 @@ class Reader:
             for name in self._names(group, f"/{gname}/"):
                 where = f"/{gname}/{name}"
                 ds = self._object(group, name, where, h5py.Dataset)
-                total += self._check_dataset(ds, where)
+                declared, stored = self._check_dataset(ds, where)
+                total, stored_total = total + declared, stored_total + stored
                 self.datasets[gname][name] = ds
+        if stored_total > self.size:  # datasets sharing (aliasing) the same bytes to multiply what the file holds
+            raise InvalidFile(f"its datasets claim {stored_total} stored bytes together, more than the file's "
+                              f"{self.size} bytes (datasets that share storage: damaged or crafted file)")
         if total > MAX_LOAD_BYTES:
             raise InvalidFile(f"its datasets declare {total} bytes, above the limit of {MAX_LOAD_BYTES} "
                               "(socbjax._hdf5.MAX_LOAD_BYTES)")
@@ -203,8 +207,8 @@ class Reader:
             raise InvalidFile(f"{where} is {_a(type(obj).__name__)}, expected {_a(cls.__name__)}")
         return obj
 
-    def _check_dataset(self, ds: h5py.Dataset, where: str) -> int:
-        """Declared bytes of ``ds`` after the storage, filter and type checks."""
+    def _check_dataset(self, ds: h5py.Dataset, where: str) -> tuple[int, int]:
+        """(declared, stored) bytes of ``ds`` after the storage, filter and type checks."""
         try:
             dcpl, space, tid = ds.id.get_create_plist(), ds.id.get_space(), ds.id.get_type()
             layout, external = dcpl.get_layout(), dcpl.get_external_count()
@@ -233,7 +237,7 @@ class Reader:
         elif stored < declared:  # (variable-length strings: the stored heap ids count, as declared)
             raise InvalidFile(f"{where} declares {declared} bytes but the file stores {stored}: the data were never "
                               "written (damaged or crafted file)")
-        return declared
+        return declared, stored
 
     def check_heaps(self) -> None:
         """Check every global heap collection (by its "GCOL" signature) before HDF5 decodes

@@ -6,7 +6,8 @@ that need them are then skipped.  With concrete values the reference state must 
 straight, stress-free state of every strand, to the relative tolerance
 ``socbjax._checks.GEOMETRY_RTOL`` (1e-6, plus the round-off of the node coordinates):
 
-* tangents are unit vectors (tangents within the tolerance are normalised exactly);
+* tangents are unit vectors to 1e-3 (``UNIT_TANGENT_TOLERANCE``; they are then normalised
+  exactly, so hand-typed directions with four decimals are accepted);
 * every segment's chord is non-zero, its length equals the chord and the tangents at both
   its nodes point along the chord (segments run from their first to their second node);
 * segments and junctions form no closed loop (a network is a forest of open strands), every
@@ -47,6 +48,8 @@ __all__ = [
     "strand_ids",
     "unit_tangents",
 ]
+
+UNIT_TANGENT_TOLERANCE = 1e-3  # |t| − 1 allowed before refusing; accepted tangents are normalised
 
 _EPS = np.finfo(np.float64).eps
 
@@ -101,19 +104,20 @@ def check_segments(segments, n: int) -> np.ndarray:
 
 
 def unit_tangents(tangents: np.ndarray) -> np.ndarray:
-    """Concrete tangents [N, d] checked to be unit vectors within ``GEOMETRY_RTOL``; those off
-    by more than round-off are normalised (the others are returned bit for bit)."""
+    """Concrete tangents [N, d] checked to be unit vectors within ``UNIT_TANGENT_TOLERANCE``
+    (1e-3: hand-typed directions such as (0.7071, 0.7071) are accepted); those off by more
+    than round-off are normalised (the others are returned bit for bit)."""
     norm = np.linalg.norm(tangents, axis=1)
     zero = norm < 1e-12
     if zero.any():
         i = int(np.argmax(zero))
         raise ValueError(f"tangents[{i}] is the zero vector {tangents[i].tolist()}; every node needs the unit tangent "
                          "of its segment(s) (the direction from the segment's first node to its second)")
-    off = np.abs(norm - 1.0) > GEOMETRY_RTOL
+    off = np.abs(norm - 1.0) > UNIT_TANGENT_TOLERANCE
     if off.any():
         i = int(np.argmax(off))
         raise ValueError(f"tangents[{i}] has length {norm[i]:.9g}, not 1: tangents must be unit vectors (to "
-                         f"{GEOMETRY_RTOL:g}); normalise them, e.g. t / np.linalg.norm(t, axis=1, keepdims=True)")
+                         f"{UNIT_TANGENT_TOLERANCE:g}); normalise them, e.g. t / np.linalg.norm(t, axis=1, keepdims=True)")
     rounding = np.abs(norm - 1.0) > 4 * _EPS
     return np.where(rounding[:, None], tangents / norm[:, None], tangents)
 

@@ -122,6 +122,9 @@ def compress_settings(settings, method, displacement) -> PathSettings:
         settings = settings.replace(method=method)
         if method not in ("displacement", "arclength"):
             raise ValueError(f"method must be 'displacement' or 'arclength', got {method!r}")
+    if settings.initial_step is None and settings.max_step is not None and not is_traced(settings.max_step):
+        # a max_step below the default first step: start at max_step (not an error about a value never given)
+        settings = settings.replace(initial_step=min(float(PROBE_PATH["initial_step"]), float(settings.max_step)))
     settings = settings.filled(**PROBE_PATH)
     if settings.method not in ("displacement", "arclength"):
         raise ValueError(f"method must be 'displacement' or 'arclength', got {settings.method!r}")

@@ -234,7 +234,7 @@ def _simulate(args) -> int:
             parameters=params,
         )
         sj.save(result, out)
-        if checkpoint.exists() and result.result != sj.RESULTS.max_steps:  # the path ended: nothing to resume
+        if checkpoint.exists():  # the path ended (whatever its result): a resume would only repeat it
             checkpoint.unlink()
     if args.figures:
         sj.save_figures(result, args.figures)

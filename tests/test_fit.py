@@ -45,14 +45,15 @@ def test_recovers_EI_and_branch_angle_from_noisy_curves(unit_mesh, seed):
 
 @pytest.mark.slow
 def test_recovers_contact_offset_and_baseline_on_a_column():
-    """An imperfect column (lateral force 0.2 pN, 14 % of its Euler load) stiffens smoothly
-    from contact, so the contact point is determined by the data."""
-    model = ColumnModel(5, supports=("clamped", "pinned"))
+    """An imperfect column (lateral force 0.1 pN, 14 % of its Euler load) stiffens smoothly
+    from contact, so the contact point is determined by the data.  Pinned–pinned: it bulges
+    through its supports' planes only past u ≈ 0.54 µm (the data reach 0.43 µm)."""
+    model = ColumnModel(5, supports=("pinned", "pinned"))
     c = np.linspace(-0.1, 0.4, 30)
     extra = {"contact_offset": 0.03, "baseline": 0.05}
-    F = _synthetic(model, {"EI": 0.071, "perturbation": 0.2}, c, seed=4, noise=0.005, displacement=0.45, **extra)
+    F = _synthetic(model, {"EI": 0.071, "perturbation": 0.1}, c, seed=4, noise=0.005, displacement=0.45, **extra)
     result = sj.fit((c, F), model, free=("EI", "contact_offset", "baseline"), initial={"EI": 0.05},
-                    fixed={"perturbation": 0.2})
+                    fixed={"perturbation": 0.1})
     assert result.converged, result.summary()
     assert result.values["EI"] == pytest.approx(0.071, rel=0.02)
     assert result.values["contact_offset"] == pytest.approx(0.03, abs=3e-3)
@@ -163,5 +164,6 @@ def test_a_fit_that_explains_nothing_is_not_converged():
     c = np.linspace(0.02, 0.2, 6)
     F = _synthetic(model, {"EI": 0.071}, c, seed=0, noise=0.0) * 1e12
     result = sj.fit((c, F), model, free="EI", initial={"EI": 0.06}, settings=sj.FitSettings(max_iterations=5))
-    assert not result.converged and result.result in (sj.RESULTS.poor_fit, sj.RESULTS.did_not_move)
+    assert result.converged is False and result.result in (sj.RESULTS.poor_fit, sj.RESULTS.did_not_move)
+    assert result.to_dict()["converged"] is False and result.to_dict()["result"] == "poor_fit"
     assert result.r_squared <= 0 and result.warnings and "R²" in result.message

@@ -452,3 +452,24 @@ def test_damaged_global_heap_refused_instead_of_hanging(tmp_path, files):
     content[start + 16 + 8:start + 16 + 16] = (5000).to_bytes(8, "little")
     path.write_bytes(bytes(content))
     assert_refused(path, "global heap", "runs past")
+
+
+def test_datasets_sharing_storage_cannot_multiply_the_file(tmp_path):
+    """Contiguous datasets whose layout addresses all point at one stored array (old file
+    format, no checksums) would load as N copies from one file's bytes: refused."""
+    n, m = 12, 2**17 // 8
+    path = tmp_path / "aliased.h5"
+    with h5py.File(path, "w", libver="earliest") as f:
+        f.attrs["format"] = np.bytes_(b"socbjax.checkpoint")
+        f.attrs["format_version"] = 2
+        f.attrs["meta"] = np.bytes_(json.dumps({"i": 0}).encode())
+        g = f.create_group("arrays")
+        g.attrs["names"] = np.bytes_(json.dumps([f"a{i}" for i in range(n)]).encode())
+        address = g.create_dataset("0", data=np.arange(m, dtype=np.float64)).id.get_offset()
+        for i in range(1, n):
+            g.create_dataset(str(i), shape=(m,), dtype=np.float64)  # contiguous, never written
+    raw = bytearray(path.read_bytes())
+    undefined = b"\xff" * 8 + (m * 8).to_bytes(8, "little")  # "no address yet" + size, in each layout message
+    assert raw.count(undefined) == n - 1
+    path.write_bytes(bytes(raw).replace(undefined, address.to_bytes(8, "little") + (m * 8).to_bytes(8, "little")))
+    assert_refused(path, "stored bytes together", checkpoint=True)

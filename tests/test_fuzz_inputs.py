@@ -253,7 +253,7 @@ ZERO_OR_NONFINITE = [
     ("zero tangent", ValueError, "tangents", lambda: network(tangents=_tangents(2, [0.0, 0.0]))),
     ("NaN tangent", ValueError, "tangents", lambda: network(tangents=_tangents(1, [np.nan, 0.0]))),
     ("tangent of length 2", ValueError, "tangents", lambda: network(tangents=_tangents(1, [2.0, 0.0]))),
-    ("tangent 1e-5 off unit", ValueError, "tangents", lambda: network(tangents=_tangents(1, [1 + 1e-5, 0.0]))),
+    ("tangent 2e-3 off unit", ValueError, "tangents", lambda: network(tangents=_tangents(1, [1 + 2e-3, 0.0]))),
     ("zero fixed direction", ValueError, "fixed_directions", lambda: network(fixed_directions=_free(0, np.zeros((1, 2))))),
     ("NaN fixed direction", ValueError, "fixed_directions", lambda: network(fixed_directions=_free(0, [[np.nan, 1.0]]))),
     ("inf fixed direction", ValueError, "fixed_directions", lambda: network(fixed_directions=_free(0, [[np.inf, 0.0]]))),
@@ -445,3 +445,13 @@ def test_traced_values_skip_the_value_checks():
 def test_normalised_tangents_are_unit():
     net = network(tangents=chain()["tangents"] * (1 + 5e-7))
     np.testing.assert_allclose(np.linalg.norm(np.asarray(net.tangents), axis=1), 1.0, rtol=1e-15)
+
+
+def test_hand_typed_unit_tangents_are_accepted_and_normalised():
+    """(0.7071, 0.7071) is 1e-5 short of unit: accepted (within 1e-3) and normalised."""
+    s = 0.7071
+    direction = np.array([s, s]) / np.hypot(s, s)
+    positions = np.outer(np.linspace(0.0, 1.0, 3), direction)
+    net = sj.make_network(positions, np.tile([s, s], (3, 1)), [[0, 1], [1, 2]], 0.5, 1.0,
+                          fixed_directions=[np.eye(2), np.zeros((0, 2)), np.zeros((0, 2))], clamped=[True, False, False])
+    np.testing.assert_allclose(np.linalg.norm(np.asarray(net.tangents), axis=1), 1.0, rtol=0, atol=1e-15)
