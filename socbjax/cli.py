@@ -182,9 +182,15 @@ def _check_outputs(args, out: Path, checkpoint: Path) -> None:
     check_output_path(checkpoint, "the checkpoint next to --out")
     if args.figures:
         _check_folder(args.figures, "--figures")
+
+
+def _check_checkpoint(args, checkpoint: Path) -> None:
+    """Under the output's lock (so a checkpoint of a run still going is reported as such)."""
     if checkpoint.exists() and not args.resume:
         raise ValueError(f"{checkpoint} holds the checkpoint of an interrupted run on this --out: continue it with "
                          "--resume, or delete that file to start afresh")
+    if args.resume and not checkpoint.exists():
+        print(f"socbjax simulate: no checkpoint at {checkpoint}; starting from the beginning", file=sys.stderr)
 
 
 def _check_folder(folder, what: str) -> None:
@@ -214,8 +220,7 @@ def _simulate(args) -> int:
     steps = {} if args.max_step is None else dict(max_step=args.max_step, initial_step=min(0.02, args.max_step))
     settings = sj.PathSettings(linear_solver=args.linear_solver, **steps)
     with output_lock(out):  # a second run on the same --out refuses instead of deleting our checkpoints
-        if args.resume and not checkpoint.exists():
-            print(f"socbjax simulate: no checkpoint at {checkpoint}; starting from the beginning", file=sys.stderr)
+        _check_checkpoint(args, checkpoint)
         print(
             f"socbjax simulate {args.network}: {net.n_nodes} nodes, {net.n_segments} segments, "
             f"{net.n_junctions} junctions; probe travel {displacement} µm{' and back' if args.unload else ''}",
