@@ -29,7 +29,7 @@ from ._figures import plot_end_forces, plot_force_curve, plot_snapshots, plot_st
 from ._fit import FitResult, FitSettings, fit  # noqa: E402
 from ._fit_figure import plot_fit, save_fit_figure  # noqa: E402
 from ._fit_problem import FitProblem, fit_problem  # noqa: E402
-from ._io import load, load_checkpoint, save, save_checkpoint  # noqa: E402
+from ._io import atomic_path, check_output_path, load, load_checkpoint, output_lock, save, save_checkpoint  # noqa: E402
 from ._jointed import JointedModel, JointedState  # noqa: E402
 from ._linear import Bordered, ColouredSparseLU, DenseLU  # noqa: E402
 from ._models import FIT_MODELS, ColumnModel, FitModel, OutcropModel, UnitMeshModel, make_fit_model  # noqa: E402
@@ -70,6 +70,6 @@ __all__ = [
     "OutcropModel", "FIT_MODELS", "make_fit_model", "Parameter", "NUISANCE_PARAMETERS", "ForceCurve", "load_curve",
     "save_curve",
     # files, figures, tooling
-    "save", "load", "save_checkpoint", "load_checkpoint", "save_figures", "plot_force_curve", "plot_snapshots",
+    "save", "load", "save_checkpoint", "load_checkpoint", "check_output_path", "output_lock", "atomic_path", "save_figures", "plot_force_curve", "plot_snapshots",
     "plot_end_forces", "plot_strand_forces", "plot_fit", "save_fit_figure", "enable_compilation_cache",
 ]

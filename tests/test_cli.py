@@ -117,7 +117,7 @@ def test_another_runs_checkpoint_is_never_discarded(tmp_path, capsys):
 
 def test_a_second_run_on_the_same_output_refuses(tmp_path, capsys):
     out = tmp_path / "run.h5"
-    holder = subprocess.Popen([sys.executable, "-c", "import sys, time; from socbjax._io import output_lock\n"
+    holder = subprocess.Popen([sys.executable, "-c", "import sys, time; from socbjax import output_lock\n"
                                f"with output_lock({str(out)!r}):\n print('locked', flush=True); time.sleep(60)"],
                               stdout=subprocess.PIPE, text=True)
     try:

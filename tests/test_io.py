@@ -19,8 +19,7 @@ import numpy as np
 import pytest
 
 import socbjax as sj
-from socbjax import CompressionResult, LimitPoint
-from socbjax._io import atomic_path, check_output_path, output_lock
+from socbjax import CompressionResult, LimitPoint, atomic_path, check_output_path, output_lock
 
 
 def make_result(dim=3, K=7, N=4, E=1, seed=0):
@@ -430,7 +429,7 @@ def test_file_size_limit_during_writes_is_a_clean_oserror(tmp_path):
 
 LOCK_CHILD = r"""
 import json, sys
-from socbjax._io import output_lock
+from socbjax import output_lock
 try:
     with output_lock(sys.argv[1]):
         print(json.dumps(["acquired", ""]))
