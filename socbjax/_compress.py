@@ -100,7 +100,7 @@ def compress(network: Network, displacement, *, at=None, unload: bool = False, m
     out = package_path(model, rec, extra, result, settings, float(displacement), unload, parameters)
     if throw and not out.completed:
         if out.result == RESULTS.surface_crossed:
-            k = next(p.step for p in out.limit_points if p.kind == "surface_crossing")
+            k = out.first_crossing.step
             raise _error(out, f"compress: {result_message(out.result)}; first at step {k}, u = {out.displacement[k]:.4g} µm "
                          "(throw=False returns the path)")
         raise _error(out, f"compress stopped: {result_message(out.result)} (reached u = {out.displacement[-1]:.4g} µm, "

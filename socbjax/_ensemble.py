@@ -316,8 +316,8 @@ def _results(batch: _Batch, models, settings, unload) -> EnsembleResult:
 
 def _where(member) -> str:
     """Why a member did not complete, and where (µm)."""
-    crossing = [p for p in member.limit_points if p.kind == "surface_crossing"]
-    at = (f"first crossing at u = {crossing[0].displacement:.4g} µm" if crossing
+    crossing = member.first_crossing
+    at = (f"first crossing at u = {crossing.displacement:.4g} µm" if crossing is not None
           else f"reached u = {member.displacement[-1]:.4g} µm")
     return f"{result_message(member.result)} ({at})"
 

@@ -136,9 +136,9 @@ def plot_force_curve(result: CompressionResult, ax=None) -> Figure:
     unstable = ~np.asarray(result.stable, bool)
     if unstable.any():
         ax.plot(u[unstable], F[unstable], "o", ls="none", mfc="none", mec="k", ms=5, label="unstable (sign det J flipped)")
-    crossing = [p for p in result.limit_points if p.kind == "surface_crossing"]
-    if crossing:  # no contact model yet: mark where the path stops being physical
-        ax.axvspan(min(p.displacement for p in crossing), float(u.max()), color="0.88", zorder=0,
+    crossing = result.first_crossing
+    if crossing is not None:  # no contact model yet: mark where the path stops being physical
+        ax.axvspan(crossing.displacement, float(u.max()), color="0.88", zorder=0,
                    label="nodes beyond surface/probe (no contact model)")
     kinds = list(dict.fromkeys(p.kind for p in result.limit_points))
     for kind in kinds:

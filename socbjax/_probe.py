@@ -57,14 +57,22 @@ def end_nodes(network: Network) -> np.ndarray:
     return np.flatnonzero(fixed & ~network.probe & ~network.attached)
 
 
+def _probe_frame(network: Network):
+    """(origin, gap) of the probe's frame: the probe nodes' mean reference position and the
+    height of the farthest opposing support along the probe direction (µm; None if nothing
+    opposes the probe).  numpy for concrete positions, traced with traced ones."""
+    pos = network.positions if is_traced(network.positions) else np.asarray(network.positions)
+    fixed = (np.einsum("nii->n", network.position_projector) > 0.5) & ~network.probe
+    origin = pos[network.probe].mean(axis=0)
+    gap = ((pos[fixed] - origin) @ np.asarray(network.probe_direction)).max() if fixed.any() else None
+    return origin, gap
+
+
 def probe_gap(network: Network) -> float:
     """Largest probe travel (µm) before the probe meets the farthest opposing support (inf if
     none; host side, concrete positions)."""
-    pos, probe = np.asarray(network.positions), network.probe
-    fixed = (np.einsum("nii->n", network.position_projector) > 0.5) & ~probe
-    if not fixed.any():
-        return np.inf
-    return float(((pos[fixed] - pos[probe].mean(axis=0)) @ network.probe_direction).max())
+    gap = _probe_frame(network)[1]
+    return np.inf if gap is None else float(gap)
 
 
 # Nodes may sit this far beyond a plane before the crossing is flagged (µm, plus the same
@@ -81,15 +89,11 @@ def surface_crossing(network: Network, positions, displacement):
     ``displacement`` [K] (µm); numpy in, numpy out; JAX arrays (traced) in, JAX out.  Until
     contact exists (no contact model yet) a crossing is a flagged status, never success."""
     xp = jnp if is_traced(positions, displacement) or isinstance(positions, jax.Array) else np
-    pos0 = np.asarray(network.positions) if not is_traced(network.positions) else network.positions
-    direction = np.asarray(network.probe_direction)
-    fixed = (np.einsum("nii->n", network.position_projector) > 0.5) & ~network.probe
-    if not fixed.any():
+    origin, gap = _probe_frame(network)
+    if gap is None:
         return xp.zeros(np.shape(displacement), bool)
-    origin = pos0[network.probe].mean(axis=0)
-    gap = ((pos0[fixed] - origin) @ direction).max()
     tol = CROSSING_TOLERANCE * (1.0 + abs(gap))
-    heights = (positions - origin) @ direction  # [K, N]
+    heights = (positions - origin) @ np.asarray(network.probe_direction)  # [K, N]
     beyond_surface = xp.any(heights > gap + tol, axis=-1)
     behind_probe = xp.any(heights < xp.asarray(displacement)[..., None] - tol, axis=-1)
     return beyond_surface | behind_probe

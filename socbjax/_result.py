@@ -103,6 +103,12 @@ class CompressionResult(eqx.Module):
         return result_message(self.result)
 
     @property
+    def first_crossing(self) -> LimitPoint | None:
+        """The "surface_crossing" event (first step with a node beyond the surface or behind
+        the probe plane), or None."""
+        return next((p for p in self.limit_points if p.kind == "surface_crossing"), None)
+
+    @property
     def n_steps(self) -> int:
         return int(self.displacement.shape[0])
 
@@ -151,9 +157,8 @@ class CompressionResult(eqx.Module):
         iterations = int(np.sum(np.asarray(self.iterations)))
         events = len(self.limit_points)
         status = "completed" if self.completed else "FAILED: " + self.status_message
-        crossing = [p for p in self.limit_points if p.kind == "surface_crossing"]
-        if crossing:
-            status += f" [first crossing at step {crossing[0].step}, u = {crossing[0].displacement:.4g} µm]"
+        if (crossing := self.first_crossing) is not None:
+            status += f" [first crossing at step {crossing.step}, u = {crossing.displacement:.4g} µm]"
         return (f"{status}; {steps} ({iterations} Newton "
                 f"iteration{'s' * (iterations != 1)}), {peak}, max displacement {disp.max() if self.n_steps else 0:.4g} µm, "
                 f"{events} event{'s' * (events != 1)}, {unstable} step{'s' * (unstable != 1)} flagged unstable")
