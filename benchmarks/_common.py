@@ -87,13 +87,41 @@ def save_figure(fig, out: Path, name: str) -> Path:
     return path
 
 
-def pyplot():
-    import matplotlib
+def new_figure(figsize=(6.4, 4.4), ncols: int = 1):
+    """(figure, axes): a figure on matplotlib's Agg canvas with ``ncols`` axes side by side
+    and constrained layout; no pyplot, so nothing changes matplotlib's global backend (the
+    figure functions can be called from a notebook or from docs/gallery.py)."""
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+    from matplotlib.figure import Figure
 
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+    fig = Figure(figsize=figsize, layout="constrained")
+    FigureCanvasAgg(fig)
+    return fig, fig.subplots(1, ncols)
 
-    return plt
+
+def plain_log_labels(ax) -> None:
+    """Tick labels of a log–log axes as plain numbers (6, 20, 0.5), minor ones only where an
+    axis spans less than about two decades, instead of 6×10⁰ and 2×10¹."""
+    from matplotlib.ticker import LogFormatter
+
+    class Plain(LogFormatter):  # LogFormatter picks which ticks to label; the label itself in %g
+        def __call__(self, x, pos=None):
+            return f"{x:g}" if super().__call__(x, pos) else ""
+
+    for axis in (ax.xaxis, ax.yaxis):
+        axis.set_major_formatter(Plain(labelOnlyBase=False, minor_thresholds=(2, 0.5)))
+        axis.set_minor_formatter(Plain(labelOnlyBase=False, minor_thresholds=(2, 0.5)))
+    ax.tick_params(which="minor", pad=5.0)  # minor ticks are 1.5 pt shorter: labels in line with the major ones
+
+
+def log_node_axis(ax, ticks) -> None:
+    """A logarithmic axis of node counts labelled with the counts themselves (2, 5, 10, ...),
+    not powers of ten, and no minor labels."""
+    from matplotlib.ticker import NullFormatter
+
+    ticks = sorted({int(t) for t in ticks})
+    ax.set_xticks(ticks, [str(t) for t in ticks])
+    ax.xaxis.set_minor_formatter(NullFormatter())
 
 
 def fmt(v, spec: str = ".3e") -> str:

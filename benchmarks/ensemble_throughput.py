@@ -188,17 +188,32 @@ def _worst(rel, ens) -> dict:
                 u_um=float(ens.displacement[b, k]), force_pN=float(ens.force[b, k]))
 
 
-def figure(ens, rows, out: Path):
-    plt = _common.pyplot()
-    fig, (ax, bx) = plt.subplots(1, 2, figsize=(10, 3.8))
-    for b in range(ens.force.shape[0]):
-        ax.plot(ens.displacement[b], ens.force[b], lw=0.6, alpha=0.6)
-    ax.set(xlabel="probe displacement (µm)", ylabel="force (pN)", title=f"{ens.force.shape[0]} members, one vmapped run")
+def figure(displacement, force, rows, member_EI=None):
+    """Left: the force curves of all members (probe displacement µm [B, K], force pN [B, K])
+    from one vmapped run, coloured by the members' EI (pN·µm², ``member_EI`` [B]) when they
+    differ in it, else by member; right: force curves per second of each mode (``rows``:
+    dicts with "mode" and "curves_per_s").  Agg figure, no pyplot."""
+    import matplotlib
+    from matplotlib.cm import ScalarMappable
+    from matplotlib.colors import Normalize
+
+    fig, (ax, bx) = _common.new_figure((10.5, 3.9), ncols=2)
+    B = len(force)
+    by_EI = member_EI is not None and np.ptp(member_EI) > 0
+    values = np.asarray(member_EI, float) if by_EI else np.arange(B, dtype=float)
+    norm = Normalize(values.min(), max(values.max(), values.min() + 1e-12))
+    cmap = matplotlib.colormaps["viridis"]
+    for b in range(B):
+        ax.plot(displacement[b], force[b], lw=0.8, color=cmap(norm(values[b])))
+    fig.colorbar(ScalarMappable(norm=norm, cmap=cmap), ax=ax, pad=0.01,
+                 label="member EI (pN·µm²)" if by_EI else "member")
+    ax.set(xlabel="probe displacement u (µm)", ylabel="probe force F (pN, compressive +)",
+           title=f"{B} members, one vmapped run (loading and unloading)")
     labels = [r["mode"] for r in rows]
     bx.barh(labels, [r["curves_per_s"] for r in rows], color="C0")
-    bx.set(xlabel="curves per second (after compilation)", title="throughput")
-    fig.tight_layout()
-    _common.save_figure(fig, out, "ensemble_throughput")
+    bx.invert_yaxis()  # the modes top to bottom in the order measured
+    bx.set(xlabel="force curves per second (after compilation)", title="throughput")
+    return fig
 
 
 def main(argv=None) -> int:
@@ -249,7 +264,9 @@ def main(argv=None) -> int:
     print(f"sharded vs unsharded: median {where['median']:.2e}; largest at member {where['member']}, step {where['step']} "
           f"(phase {where['phase']}, u = {where['u_um']:.3g} µm)" if where else "")
     _common.print_table(["quantity", "value"], [[k, v] for k, v in why.items()], title="Where the time goes (sparse LU counted)", spec=".4g")
-    figure(ens["result"], rows, args.out)
+    member_EI = [float(np.asarray(net.EI).mean()) for net in nets]
+    _common.save_figure(figure(ens["result"].displacement, ens["result"].force, rows, member_EI), args.out,
+                        "ensemble_throughput")
     payload = dict(displacement_um=DISPLACEMENT, members=B, network=dict(dim=nets[0].dim, nodes=nets[0].n_nodes,
                    segments=nets[0].n_segments), max_steps=SETTINGS.max_steps, rows=rows,
                    throughput_ratio_vmapped_over_sequential=ratio, same_steps=same_steps,

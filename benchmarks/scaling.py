@@ -170,24 +170,37 @@ def slope(rows, key, lo=1000, hi=10000):
     return float(np.polyfit(s, v, 1)[0])
 
 
-def _figure(results, args):
-    plt = C.pyplot()
-    fig, axes = plt.subplots(1, 2, figsize=(10, 4))
+def figure(payload: dict):
+    """Newton-iteration cost (left) and memory (right) against segments, log–log, for the
+    chain and branched families, with a slope-1 guide; from the JSON payload (or its file)."""
+    fig, axes = C.new_figure((10.5, 4.4), ncols=2)
+    results = payload["results"]
     for family, marker in (("chain", "o"), ("branched", "s")):
-        rows = results[family]
+        rows = results.get(family, [])
         s = [r["segments"] for r in rows]
-        axes[0].loglog(s, [r["iteration_ms"] for r in rows], marker + "-", label=f"{family}: iteration")
-        axes[0].loglog(s, [r["assembly_ms"] for r in rows], marker + ":", label=f"{family}: Jacobian assembly")
-        axes[0].loglog(s, [r["factor_solve_ms"] for r in rows], marker + "--", label=f"{family}: SuperLU factor+solve")
-        axes[1].loglog(s, [r["memory_mb"] for r in rows], marker + "-", label=f"{family}: XLA buffers + LU")
-    ref = np.array([100, 16000])
-    axes[0].loglog(ref, 0.05 * ref, "k-", lw=0.5, label="slope 1")
-    axes[0].set(xlabel="segments", ylabel="ms per Newton iteration", title="Newton iteration cost")
-    axes[1].set(xlabel="segments", ylabel="MiB", title="memory of one iteration")
+        axes[0].loglog(s, [r["iteration_ms"] for r in rows], marker + "-", color="C0", mfc="none" if family == "branched" else None,
+                       label=f"{family}: Newton iteration")
+        axes[0].loglog(s, [r["assembly_ms"] for r in rows], marker + ":", color="C1", mfc="none" if family == "branched" else None,
+                       label=f"{family}: Jacobian assembly")
+        axes[0].loglog(s, [r["factor_solve_ms"] for r in rows], marker + "--", color="C2",
+                       mfc="none" if family == "branched" else None, label=f"{family}: SuperLU factor + solve")
+        axes[1].loglog(s, [r["memory_mb"] for r in rows], marker + "-", color="C0", mfc="none" if family == "branched" else None,
+                       label=family)
+    every = [r["segments"] for rows in results.values() for r in rows]
+    cost = [r["iteration_ms"] for rows in results.values() for r in rows]
+    if every:  # a slope-1 guide through the geometric middle of the iteration costs
+        ref = np.array([min(every), max(every)], float)
+        mid = np.exp(np.mean(np.log(cost))) / np.exp(np.mean(np.log(every)))
+        axes[0].loglog(ref, mid * ref, "k-", lw=0.6, label="slope 1 (linear cost)")
+    axes[0].set(xlabel="segments", ylabel="wall time per Newton iteration (ms)", title="Newton iteration cost")
+    axes[1].set(xlabel="segments", ylabel="memory of one iteration (MiB)", title="memory (XLA buffers + LU factors)")
     for ax in axes:
-        ax.legend(fontsize=7)
+        C.plain_log_labels(ax)
         ax.grid(True, which="both", alpha=0.3)
-    C.save_figure(fig, args.out, NAME)
+    handles, names = axes[0].get_legend_handles_labels()  # one legend below both panels: the data keep the axes
+    fig.legend(handles, names, fontsize=8, ncols=4, loc="outside lower center", frameon=False)
+    axes[1].legend(fontsize=8, loc="upper left")
+    return fig
 
 
 def main(argv=None) -> int:
@@ -226,8 +239,9 @@ def main(argv=None) -> int:
                   "chain_10000_solve_lt_10s": big["solve_s"] < 10.0}
         for k, v in checks.items():
             print(f"{'PASS' if v else 'FAIL'}: {k}")
-    C.write_json(args.out, NAME, args, {"results": results, "slopes": slopes, "checks": checks})
-    _figure(results, args)
+    payload = {"results": results, "slopes": slopes, "checks": checks}
+    C.write_json(args.out, NAME, args, payload)
+    C.save_figure(figure(payload), args.out, NAME)
     return 0
 
 

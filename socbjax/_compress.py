@@ -24,7 +24,8 @@ from ._probe import (
     compress_settings,
     package_path,
 )
-from ._protocol import Checkpoint, Progress, run_phases
+from ._progress import Progress
+from ._protocol import Checkpoint, run_phases
 from ._quadrature import get_quadrature
 from ._residual import SOCBModel
 from ._result import CompressionResult
@@ -75,8 +76,12 @@ def compress(network: Network, displacement, *, at=None, unload: bool = False, m
         Newton tolerance 1e-10; ``linear_solver``, ``quadrature_order``).
     checkpoint : a file path or :class:`socbjax.Checkpoint` (path, every=50 steps,
         resume=False): write the run's state atomically; resume ends with the same curve.
-    progress : True for progress on stderr (compilation, then steps, displacement and time),
-        or a callable ``progress(phase, u, steps, done)`` called between chunks of the path.
+    progress : True for progress on stderr: ``compiling … 12 s`` while JAX compiles, then per
+        phase the probe displacement (µm), probe force (pN), accepted steps and elapsed time,
+        refreshed about once a second on a terminal (every 10 s in a log); or a callable
+        ``progress(phase, u, steps, done)`` called between chunks of the path (phase name,
+        µm, accepted steps of the phase, whether it ended).  Either way the path runs in
+        chunks of about half a second; the result is the same as without progress.
     throw : raise :class:`socbjax.ConvergenceError` when the protocol does not complete (the
         partial result is ``error.result``; under ``jax.jit`` an ``equinox`` runtime error);
         with ``throw=False`` check ``result.completed`` / ``result.result``.
@@ -93,18 +98,24 @@ def compress(network: Network, displacement, *, at=None, unload: bool = False, m
             raise ValueError("checkpoint applies to full paths; compress(..., at=...) is one traced computation")
         return compress_at(model, displacement, at, unload=unload, perturbation=perturbation, settings=settings,
                            throw=throw, parameters=parameters)
-    model = eqx.tree_at(lambda m: m.network, model, network.replace(loads=applied_loads(network, perturbation)))
-    inner = linear_solver_for(model, settings.linear_solver)
     bar = Progress(progress, float(displacement))
-    rec, extra, result = run_phases(model, displacement, unload, settings, inner, progress=bar, checkpoint=checkpoint)
+    bar.start()  # before the set-up below: its first run compiles too (op by op)
+    try:
+        model = eqx.tree_at(lambda m: m.network, model, network.replace(loads=applied_loads(network, perturbation)))
+        inner = linear_solver_for(model, settings.linear_solver)
+        rec, extra, result = run_phases(model, displacement, unload, settings, inner, progress=bar,
+                                        checkpoint=checkpoint)
+    finally:
+        bar.close()
     out = package_path(model, rec, extra, result, settings, float(displacement), unload, parameters)
     if throw and not out.completed:
         if out.result == RESULTS.surface_crossed:
             k = out.first_crossing.step
             raise _error(out, f"compress: {result_message(out.result)}; first at step {k}, u = {out.displacement[k]:.4g} µm "
                          "(throw=False returns the path)")
+        steps = f"{out.n_steps} step{'' if out.n_steps == 1 else 's'}"
         raise _error(out, f"compress stopped: {result_message(out.result)} (reached u = {out.displacement[-1]:.4g} µm, "
-                     f"{out.n_steps} steps). Try method='arclength', smaller PathSettings steps, or throw=False.")
+                     f"{steps}). Try method='arclength', smaller PathSettings steps, or throw=False.")
     return out
 
 

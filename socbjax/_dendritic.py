@@ -337,7 +337,7 @@ def _grow_outcrop(generations, gap, growth, ell, phi, rng, dim, max_redraws) -> 
             break
         bound = len(g.segs) + _future_segments(growing, g, gap, growth, ell, generations - generation, generation == 0)
         check_size("generations", generations, bound, what="segments at least", fix=(
-            f"a lower bound at generation {generation + 1}, from the {len(growing)} strands still below the surface and "
+            f"a lower bound at generation {generation + 1}, from the {len(growing)} strand{'' if len(growing) == 1 else 's'} still below the surface and "
             "their distances to it; use fewer generations, a smaller gap, a smaller branch_angle, or a larger growth "
             "or segment_length"))
         if generation:
@@ -365,6 +365,6 @@ def _grow_outcrop(generations, gap, growth, ell, phi, rng, dim, max_redraws) -> 
             if len(g.segs) > MAX_SEGMENTS:  # checked per strand: one generation can add many
                 check_size("generations", generations, len(g.segs), what="segments at least", fix=(
                     f"the outcrop passed the limit while growing generation {generation + 1} with "
-                    f"{sum(not s['stopped'] for s in strands)} strands still below the surface: use fewer generations, "
+                    f"{sum(not s['stopped'] for s in strands)} strand(s) still below the surface: use fewer generations, "
                     "a smaller gap, or a larger growth or segment_length"))
     return g

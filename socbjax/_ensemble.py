@@ -95,8 +95,9 @@ class EnsembleResult(eqx.Module):
         return len(self.results)
 
     def __repr__(self) -> str:
-        return (f"EnsembleResult({len(self)} members, {int(self.completed.sum())} completed, "
-                f"{int(self.n_steps.max())} steps max, devices {len(self.devices)})")
+        n, steps, devices = len(self), int(self.n_steps.max()), len(self.devices)
+        return (f"EnsembleResult({n} member{'' if n == 1 else 's'}, {int(self.completed.sum())} completed, "
+                f"at most {steps} step{'' if steps == 1 else 's'}, {devices} device{'' if devices == 1 else 's'})")
 
 
 # --------------------------------------------------------------------------- validation

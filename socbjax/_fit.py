@@ -35,7 +35,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from ._fit_problem import BRANCHES, fit_problem
+from ._fit_problem import BRANCHES, check_start, fit_problem, scaled_start
 from ._path import PathSettings
 from ._solution import RESULTS, ConvergenceError, result_name
 
@@ -140,8 +140,9 @@ class FitResult(eqx.Module):
         return self.model_force - self.force
 
     def summary(self) -> str:
-        lines = [f"fit of {self.model} ({self.optimizer}): {self.message}; loss {self.loss:.4g} pN², "
-                 f"rms {self.rms:.4g} pN over {self.force.size} points"]
+        head = (f"fit of {self.model} ({self.optimizer}): {self.message}; loss {self.loss:.4g} pN², "
+                f"rms {self.rms:.4g} pN, R² {self.r_squared:.3g}, over {plural(self.force.size, 'point')}")
+        lines = [head]
         for name in self.names:
             lines.append(f"  {name:<14s} = {self.values[name]:.6g} ± {self.standard_errors[name]:.2g} {self.units[name]}")
         fixed = [n for n in self.values if n not in self.names]
@@ -176,24 +177,46 @@ def _finite_json(value):
     return None if isinstance(value, float) and not math.isfinite(value) else value
 
 
+def plural(n: int, word: str, many: str | None = None) -> str:
+    """``"1 point"``, ``"2 points"`` (``many``: an irregular plural)."""
+    return f"{n} {word if n == 1 else (many or word + 's')}"
+
+
 class _Progress:
-    def __init__(self, enabled: bool, total: int):
-        self.enabled, self.total = enabled, total
+    """Progress on stderr, one line each: the phases (first evaluation, compilation), every
+    optimiser iteration (iteration, loss, values, elapsed time), a rejected step when more
+    than a second has passed without a line, and the end."""
+
+    def __init__(self, enabled: bool, total: int, units: dict):
+        self.enabled, self.total, self.units = enabled, total, units
+        self.t0 = self.last = time.perf_counter()
+
+    def _line(self, text: str) -> None:
+        if self.enabled:
+            self.last = time.perf_counter()
+            sys.stderr.write(f" fit {self.last - self.t0:6.1f} s: {text}\n")
+            sys.stderr.flush()
+
+    def note(self, text: str) -> None:
+        self._line(text)
+
+    def _shown(self, values: dict) -> str:
+        return ", ".join(f"{k} = {float(v):.6g} {self.units.get(k, '')}".rstrip() for k, v in values.items())
 
     def __call__(self, iteration: int, loss: float, values: dict, done: bool = False):
-        if not self.enabled:
-            return
-        bar = "#" * int(30 * min(iteration / max(self.total, 1), 1.0))
-        shown = " ".join(f"{k}={float(v):.4g}" for k, v in values.items())
-        sys.stderr.write(f"\r fit [{bar:<30s}] it {iteration:3d} loss {loss:.4e} {shown}" + ("\n" if done else ""))
-        sys.stderr.flush()
+        head = f"done after {plural(iteration, 'iteration')}" if done else f"iteration {iteration}/{self.total}"
+        self._line(f"{head}: loss {loss:.6g}; {self._shown(values)}")
+
+    def rejected(self, iteration: int, damping: float) -> None:
+        if time.perf_counter() - self.last >= 1.0:
+            self._line(f"iteration {iteration}/{self.total}: step rejected (loss not lower), damping raised to {damping:.3g}")
 
 
 def _float_values(values: dict) -> dict:
     return {k: float(v) for k, v in values.items()}
 
 
-def _levenberg_marquardt(jac, z, max_iterations, tolerance, report):
+def _levenberg_marquardt(jac, z, max_iterations, tolerance, report, rejected=lambda iteration, damping: None):
     """Minimise ½|r(z)|²; ``jac(z)`` -> (J [m, p], r [m]).  Returns (z, r, J, history, converged,
     message, evaluations)."""
     J, r = (np.asarray(a) for a in jac(z))
@@ -215,6 +238,7 @@ def _levenberg_marquardt(jac, z, max_iterations, tolerance, report):
             if loss_new < loss:
                 break
             damping *= 4.0
+            rejected(iteration, damping)
         else:
             message = "stopped: no step decreased the loss (at a minimum to within the path's accuracy)"
             converged = True
@@ -240,7 +264,7 @@ def _optax(loss_and_grad, loss_fn, z, optimizer, max_iterations, tolerance, lear
         if not (np.isfinite(float(loss)) and np.all(np.isfinite(np.asarray(grad)))):
             z = jnp.asarray(history[-2]["z"]) if len(history) > 1 else z
             message = (f"stopped at iteration {iteration}: the path could not be followed at the optimiser's step; "
-                       "use optimizer='lm' (which rejects such steps) or a smaller learning_rate")
+                       "use the 'lm' optimizer (which rejects such steps) or a smaller Adam learning rate")
             break
         if optimizer == "lbfgs":
             updates, state = opt.update(grad, state, z, value=loss, grad=grad, value_fn=loss_fn)
@@ -257,21 +281,6 @@ def _optax(loss_and_grad, loss_fn, z, optimizer, max_iterations, tolerance, lear
 
 
 # ------------------------------------------------------------------------------ fit
-def _check_start(problem) -> float:
-    """Evaluate the model once at the initial values, untraced, so that a path that cannot be
-    followed over the data's range fails here with the solver's own message."""
-    try:
-        r = np.asarray(problem.residuals(problem.z0, throw=True))
-    except ConvergenceError as err:
-        raise ValueError(
-            f"the model cannot be evaluated over the data's compression range (up to {problem.reach:.4g} µm) at the "
-            f"initial values: {err} Crop the curve (max_compression), use method='arclength', or start elsewhere"
-        ) from None
-    if not np.all(np.isfinite(r)):
-        raise ValueError("the model gives non-finite forces at the initial values")
-    return 0.5 * float(r @ r)
-
-
 def _with_value(fn):
     def both(z):
         r = fn(z)
@@ -314,17 +323,16 @@ def _uncertainties(J, r, z, table, free):
     return se, corr, cov, identifiable, warnings
 
 
-def _optimise(problem, settings: FitSettings, report):
-    """Run the chosen optimiser: (z, history, converged, message, evaluations, jac)."""
-    jac = jax.jit(jax.jacfwd(_with_value(problem.residuals), has_aux=True))  # one path per evaluation
+def _optimise(problem, settings: FitSettings, jac, report, bar):
+    """Run the chosen optimiser: (z, history, converged, message, evaluations)."""
     if settings.optimizer == "lm":
         z, _, _, history, converged, message, evaluations = _levenberg_marquardt(
-            jac, problem.z0, settings.max_iterations, settings.tolerance, report)
-        return z, history, converged, message, evaluations, jac
+            jac, problem.z0, settings.max_iterations, settings.tolerance, report, bar.rejected)
+        return z, history, converged, message, evaluations
+    bar.note(f"compiling the loss's gradient ({settings.optimizer})")
     loss = lambda z: 0.5 * jnp.sum(problem.residuals(z) ** 2)  # noqa: E731
-    out = _optax(jax.jit(jax.value_and_grad(loss)), jax.jit(loss), problem.z0, settings.optimizer,
-                 settings.max_iterations, settings.tolerance, settings.learning_rate, report)
-    return (*out, jac)
+    return _optax(jax.jit(jax.value_and_grad(loss)), jax.jit(loss), problem.z0, settings.optimizer,
+                  settings.max_iterations, settings.tolerance, settings.learning_rate, report)
 
 
 def fit(curve, model="unit-mesh", *, free=("EI",), fixed: dict | None = None, initial: dict | None = None,
@@ -354,7 +362,15 @@ def fit(curve, model="unit-mesh", *, free=("EI",), fixed: dict | None = None, in
 
     Returns a :class:`FitResult`.  Raises ``ValueError`` for unknown or doubly-specified
     parameters, values outside bounds, non-identifiable combinations, curves that never reach
-    contact or reach beyond the model's gap, and fewer than 3 points.
+    contact, and fewer than 3 points; ``FitRangeError`` (a ``ValueError``, with ``cause``
+    "gap", "surface", "fold" or "path") when the model cannot be evaluated over the curve's
+    range at the start: beyond its probe–surface gap, past the compression where its nodes
+    cross the surface (no contact model), or past a fold under displacement control.
+
+    Start: EI parameters without an ``initial`` value (when they set every segment's EI and
+    neither ``force_scale`` nor ``perturbation`` is given) start at the default scaled to the
+    data's force level — one least-squares factor, exact because the force is proportional
+    to EI at fixed geometry.
     """
     settings = FitSettings() if settings is None else settings
     if not isinstance(settings, FitSettings):
@@ -364,14 +380,49 @@ def fit(curve, model="unit-mesh", *, free=("EI",), fixed: dict | None = None, in
                           min_compression=settings.min_compression, method=settings.method, path=settings.path,
                           model_options=model_options)
     t0 = time.perf_counter()
-    loss0 = _check_start(problem)
-    bar = _Progress(progress, settings.max_iterations)
+    table = problem.table
+    bar = _Progress(progress, settings.max_iterations, {n: table[n].unit for n in table})
+    bar.note(f"{plural(problem.force.size, 'data point')} up to {float(np.max(problem.compression)):.4g} µm, "
+             f"{plural(len(problem.free), 'free parameter')} ({', '.join(problem.free)}); evaluating the {problem.model.name} "
+             "model and its Jacobian at the start (the first evaluation compiles them: tens of seconds)")
+    # One compiled program (the residuals and their Jacobian) serves the start's checks, the
+    # optimiser and the uncertainties; a start that fails is diagnosed afterwards.
+    jac = jax.jit(jax.jacfwd(_with_value(problem.residuals), has_aux=True))
+
+    def residuals(z):
+        return jac(jnp.asarray(z))[1]
+
+    r0 = check_start(problem, problem.z0, residuals)
+    loss0 = 0.5 * float(r0 @ r0)
+    problem, note = scaled_start(problem, r0, dict(initial or {}), residuals)
+    if note:
+        bar.note(note)
 
     def report(iteration, loss, z):
-        bar(iteration, loss, _float_values(problem.to_values(z)))
+        bar(iteration, loss, _float_values({n: v for n, v in problem.to_values(z).items() if n in problem.free}))
 
-    z, history, converged, message, evaluations, jac = _optimise(problem, settings, report)
+    z, history, converged, message, evaluations = _optimise(problem, settings, jac, report, bar)
     return _result(problem, settings, jac, z, history, converged, message, evaluations, bar, t0, loss0)
+
+
+def _systematic(residuals: np.ndarray) -> str | None:
+    """A warning when the residuals' signs come in far fewer runs than independent noise gives
+    (Wald–Wolfowitz runs test, z < −3: a false alarm in 1/700 fits of a right model): the
+    model misses the curve's shape, whatever R² says."""
+    signs = np.sign(residuals[residuals != 0])
+    n_pos, n_neg = int(np.sum(signs > 0)), int(np.sum(signs < 0))
+    n = n_pos + n_neg
+    if n_pos < 2 or n_neg < 2:
+        return None
+    runs = 1 + int(np.sum(signs[1:] != signs[:-1]))
+    mean = 2.0 * n_pos * n_neg / n + 1.0
+    var = 2.0 * n_pos * n_neg * (2.0 * n_pos * n_neg - n) / (n**2 * (n - 1))
+    z = (runs - mean) / math.sqrt(var) if var > 0 else 0.0
+    if z >= -3.0:
+        return None
+    return (f"the residuals are systematic: their signs change {plural(runs - 1, 'time')} along the curve where noise "
+            f"would give about {mean - 1:.0f} (runs test z = {z:.1f}): the model does not follow the curve's shape "
+            "(see the figure); the values are that model's best compromise, not properties of the sample")
 
 
 def _stationary(J: np.ndarray, r: np.ndarray) -> bool:
@@ -400,8 +451,8 @@ def _result(problem, settings, jac, z, history, converged, message, evaluations,
     values = _float_values(problem.to_values(jnp.asarray(z)))
     if not (np.all(np.isfinite(r)) and np.all(np.isfinite(J))):
         raise ConvergenceError(f"the fit ended at {values}, where the model path cannot be followed ({message}); "
-                               "use optimizer='lm' or other initial values")
-    bar(len(history), 0.5 * float(r @ r), values, done=True)
+                               "use the 'lm' optimizer or other initial values")
+    bar(len(history), 0.5 * float(r @ r), {n: values[n] for n in problem.free}, done=True)
     for h in history:
         h["values"] = _float_values(problem.to_values(jnp.asarray(h.pop("z"))))
     free, table = problem.free, problem.table
@@ -411,6 +462,9 @@ def _result(problem, settings, jac, z, history, converged, message, evaluations,
     r_squared = 1.0 - float(r @ r) / spread if spread > 0 else -math.inf
     moved = 0.5 * float(weighted @ weighted) < loss0 * (1.0 - 1e-12)
     result, message = _status(converged, message, moved, _stationary(J, weighted), r_squared)
+    systematic = _systematic(weighted)
+    if systematic and result == RESULTS.successful:
+        warnings = [systematic] + warnings
     if result != RESULTS.successful:
         warnings = [f"{message}: {RESULTS[result]}"] + warnings
     return FitResult(

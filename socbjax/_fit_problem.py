@@ -16,6 +16,7 @@ unconstrained parameters z (bounds by transforms, :class:`socbjax.Parameter`), s
 from __future__ import annotations
 
 import dataclasses
+import math
 from collections.abc import Callable
 
 import jax.numpy as jnp
@@ -26,10 +27,69 @@ from ._compress import compress
 from ._models import FitModel, make_fit_model
 from ._parameters import NUISANCE_PARAMETERS, Parameter
 from ._path import PathSettings
+from ._solution import RESULTS, ConvergenceError
 
-__all__ = ["FitProblem", "fit_problem", "BRANCHES"]
+__all__ = ["FitProblem", "fit_problem", "BRANCHES", "FitRangeError", "PYTHON_FIXES", "stiffness_sources", "check_start",
+           "diagnose", "scaled_start"]
 
 BRANCHES = ("loading", "unloading")
+
+# How each front end spells the fixes a FitRangeError suggests ({value}, {name} filled in).
+PYTHON_FIXES = {
+    "crop": "crop the curve: curve.select(max_compression={value})",
+    "size": "use a larger model: model_options={{'{name}': {value}}}",
+    "method": "follow the fold with settings=socbjax.FitSettings(method='arclength')",
+    "start": "start elsewhere (initial=...)",
+}
+
+
+class FitRangeError(ValueError):
+    """The model cannot be evaluated over the data's compression range.
+
+    cause : "gap" (the data reach past the probe–surface gap), "surface" (a node crosses the
+        surface or the probe plane at ``limit`` µm: there is no contact model, the path is
+        not physical beyond), "fold" (displacement control cannot follow the path past a fold
+        at ``limit`` µm) or "path" (the solver failed otherwise; ``detail`` says how).
+    reach : the largest probe travel the data need (µm; data compression + contact offset).
+    compression : the data's largest compression (µm).
+    size : (option name, value) of a model that would typically reach, or None.
+    safe : probe travel (µm) the model can typically be followed to (default ``limit``): the
+        suggested crop stays below it.
+    :meth:`describe` words the message with another front end's fixes (the command line's).
+    """
+
+    def __init__(self, cause: str, *, model: str, reach: float, compression: float, limit: float | None = None,
+                 size: tuple | None = None, detail: str = "", where: str = "", safe: float | None = None):
+        self.cause, self.model, self.reach, self.compression = cause, model, float(reach), float(compression)
+        self.limit, self.size, self.detail, self.where = limit, size, detail, where
+        self.safe = limit if safe is None else safe
+        super().__init__(self.describe(PYTHON_FIXES))
+
+    def _crop(self) -> float:
+        """A data compression (µm, 2 significant digits, rounded down) that stays below the limit."""
+        room = self.reach - self.compression  # contact offset (and its room) on top of the data
+        value = 0.9 * (self.safe if self.safe is not None else self.reach) - room
+        digits = 10.0 ** (np.floor(np.log10(max(value, 1e-12))) - 1)
+        return float(np.floor(value / digits) * digits)
+
+    def describe(self, fixes: dict) -> str:
+        crop = fixes["crop"].format(value=f"{self._crop():g}") if self._crop() > 0 else None
+        size = fixes["size"].format(name=self.size[0], value=f"{self.size[1]:g}") if self.size else None
+        data = f"the curve reaches {self.compression:.4g} µm of compression"
+        if self.cause == "gap":
+            text = (f"{data}, but the {self.model} model can be compressed by less than {self.limit:.4g} µm "
+                    "(its probe–surface gap)")
+        elif self.cause == "surface":
+            text = (f"{data}, but {self.where}the {self.model} model's nodes cross the surface or the probe plane at "
+                    f"{self.limit:.4g} µm of compression: socbjax has no contact model, the path beyond is not physical")
+        elif self.cause == "fold":
+            text = (f"{self.where}the {self.model} model's force path folds back (a snap-through) at {self.limit:.4g} µm "
+                    f"of compression, within the data's {self.compression:.4g} µm; displacement control cannot follow it")
+            return f"{text}; {fixes['method']}" + (f", or {crop}" if crop else "")
+        else:
+            text = f"{self.where}the {self.model} model cannot be followed to {self.reach:.4g} µm: {self.detail}"
+            return f"{text}; " + (f"{crop}, or " if crop else "") + fixes["start"]
+        return f"{text}; " + " or ".join(filter(None, (size, crop)))
 
 
 @dataclasses.dataclass(frozen=True)
@@ -43,6 +103,8 @@ class FitProblem:
     compression, force, sigma : [m] the data fitted (µm, pN, pN).
     table : name -> :class:`socbjax.Parameter` (with the fit's bounds); fixed : fixed values.
     model : the :class:`socbjax.FitModel`; reach : the largest probe travel needed (µm).
+    path : z -> the adaptive :func:`socbjax.compress` path (untraced, ``throw=False``) over
+        the data's range at those values: what to inspect when ``residuals`` fails.
     """
 
     residuals: Callable
@@ -56,6 +118,7 @@ class FitProblem:
     table: dict
     model: FitModel
     reach: float
+    path: Callable | None = None
 
 
 def _data(curve, branch: str, max_points: int, min_compression):
@@ -116,14 +179,21 @@ def _parameter_table(model: FitModel, free, fixed, initial, bounds) -> tuple[dic
     return table, free, fixed, start
 
 
-def _check_identifiable(model: FitModel, free, fixed) -> None:
-    if "force_scale" not in free:
-        return
-    source = np.full(model.base.n_segments, "EI", dtype=object)  # the parameter each segment's EI comes from
+def stiffness_sources(model: FitModel, free, fixed) -> set:
+    """The parameters the segments' EI values come from (a group's when it is free or fixed,
+    else the global ``EI``)."""
+    source = np.full(model.base.n_segments, "EI", dtype=object)
     for name, mask in model.groups.items():
         if name in free or name in fixed:
             source[mask] = name
-    ei_free = sorted(set(source) & set(free))
+    return set(source)
+
+
+def _check_identifiable(model: FitModel, free, fixed) -> None:
+    if "force_scale" not in free:
+        return
+    source = stiffness_sources(model, free, fixed)
+    ei_free = sorted(source & set(free))
     if all(name in free for name in source):
         raise ValueError(
             f"force_scale and {', '.join(ei_free)} are not separately identifiable from one curve: at fixed geometry "
@@ -172,11 +242,10 @@ def fit_problem(curve, model="unit-mesh", *, free=("EI",), fixed=None, initial=N
     offset_room = max(0.0, table["contact_offset"].upper or 0.0) if "contact_offset" in free else 0.0
     reach = float(c.max()) + max(fixed.get("contact_offset", start.get("contact_offset", 0.0)), 0.0) + offset_room
     if reach >= model.gap:
-        raise ValueError(
-            f"the curve reaches {float(c.max()):.4g} µm of compression (plus contact offset), but the {model.name} model "
-            f"can be compressed by less than {model.gap:.4g} µm (probe–surface gap); crop the curve, e.g. "
-            f"curve.select(max_compression={0.9 * model.gap:.3g}), or use a model with a larger gap"
-        )
+        size = model.size_for(reach)
+        raise FitRangeError("gap", model=model.name, reach=reach, compression=float(c.max()), limit=model.gap,
+                            size=None if size is None else (model.size_option, size),
+                            safe=model.reach_fraction * model.gap if model.size_option else None)
     physical = [n for n in (*free, *fixed) if n in model.parameters]
 
     def to_values(z):
@@ -196,11 +265,88 @@ def fit_problem(curve, model="unit-mesh", *, free=("EI",), fixed=None, initial=N
                           settings=path, perturbation=values.get("perturbation"), throw=throw)
         force = result.force[c.size:][::-1] if unload else result.force
         predicted = values.get("force_scale", 1.0) * jnp.where(u > 0, force, 0.0) + values.get("baseline", 0.0)
-        # a path that fails at these values gives NaN residuals: the optimiser rejects the step
-        return jnp.where(jnp.all(result.converged), (predicted - F_j) / sigma_j, jnp.nan)
+        # a path that fails at these values, or whose nodes cross the surface (not physical: no
+        # contact model), gives NaN residuals: the optimiser rejects the step
+        ok = jnp.all(result.converged) & (result.result != RESULTS.surface_crossed)
+        return jnp.where(ok, (predicted - F_j) / sigma_j, jnp.nan)
+
+    def full_path(z):
+        values = to_values(z)
+        network = model.network({n: values[n] for n in physical})
+        return compress(network, reach, unload=unload, method=method, settings=path,
+                        perturbation=values.get("perturbation"), throw=False)
 
     z0 = jnp.asarray([table[n].to_z(start[n]) for n in free])
     return FitProblem(residuals=residuals, to_values=to_values, z0=z0, free=free, fixed=fixed, compression=c, force=F,
-                      sigma=sigma, table=table, model=model, reach=reach)
+                      sigma=sigma, table=table, model=model, reach=reach, path=full_path)
 
 
+# ----------------------------------------------------------------- the start of a fit
+def check_start(problem: FitProblem, z, residuals: Callable | None = None,
+                where: str = "at the initial values ") -> np.ndarray:
+    """The residuals at ``z`` (``residuals(z)``, default ``problem.residuals``), checked: a
+    model that cannot be followed over the data's range there raises :class:`FitRangeError`
+    with the reason (:func:`diagnose`)."""
+    try:
+        r = np.asarray(residuals(z) if residuals is not None else problem.residuals(z, throw=True))
+    except ConvergenceError as err:
+        raise diagnose(problem, z, str(err), where) from None
+    if not np.all(np.isfinite(r)):
+        raise diagnose(problem, z, None, where)
+    return r
+
+
+def diagnose(problem: FitProblem, z, message: str | None, where: str) -> FitRangeError:
+    """Why the model cannot be evaluated over the data's range at ``z``: the adaptive path
+    (untraced) says where nodes cross the surface (no contact model) or where a fold stops
+    displacement control; otherwise the solver's ``message`` (found if None)."""
+    common = {"model": problem.model.name, "reach": problem.reach, "compression": float(np.max(problem.compression)),
+              "where": where}
+    try:
+        path = problem.path(z)
+    except (ConvergenceError, ValueError) as err:
+        return FitRangeError("path", detail=" ".join(str(err).split()), **common)
+    crossing = path.first_crossing
+    if crossing is not None and crossing.displacement < problem.reach:
+        size = problem.model.size_for(problem.reach)
+        return FitRangeError("surface", limit=crossing.displacement,
+                             size=None if size is None else (problem.model.size_option, size), **common)
+    if path.result == RESULTS.fold:
+        return FitRangeError("fold", limit=float(np.max(np.asarray(path.displacement))), **common)
+    if message is None:
+        try:
+            problem.residuals(z, throw=True)
+            message = "the model's forces are not finite"
+        except ConvergenceError as err:
+            message = str(err)
+    return FitRangeError("path", detail=" ".join(message.split()), **common)
+
+
+def scaled_start(problem: FitProblem, r: np.ndarray, initial: dict, residuals: Callable | None = None) -> tuple:
+    """(problem, note): when every segment's EI comes from free parameters without a starting
+    value (and neither ``force_scale`` nor ``perturbation`` is set), scale them to the data's
+    force level: at fixed geometry the force is proportional to EI, so one least-squares
+    factor (from the first evaluation) puts the start at the best EI for the start's shape."""
+    free, fixed, table = problem.free, problem.fixed, problem.table
+    sources = stiffness_sources(problem.model, free, fixed)
+    if (not sources <= set(free) or sources & set(initial) or {"force_scale", "perturbation"} & set((*free, *fixed))):
+        return problem, None
+    values = {k: float(v) for k, v in problem.to_values(problem.z0).items()}
+    w = 1.0 / problem.sigma
+    model_part = (r / w + problem.force - values.get("baseline", 0.0)) * w  # the model's force (without baseline) / σ
+    data_part = (problem.force - values.get("baseline", 0.0)) * w
+    denominator = float(model_part @ model_part)
+    factor = float(model_part @ data_part) / denominator if denominator > 0 else math.nan
+    if not (math.isfinite(factor) and factor > 0) or abs(factor - 1.0) < 1e-3:
+        return problem, None
+    z = np.asarray(problem.z0, float).copy()
+    for i, name in enumerate(free):
+        if name in sources:
+            try:
+                z[i] = float(table[name].to_z(table[name].check(values[name] * factor, "scaled start")))
+            except ValueError:
+                return problem, None
+    scaled = dataclasses.replace(problem, z0=jnp.asarray(z))
+    check_start(scaled, scaled.z0, residuals, "at the start scaled to the data's force level ")
+    shown = ", ".join(f"{n} = {values[n] * factor:.4g}" for n in free if n in sources)
+    return scaled, f"start {shown} {table['EI'].unit}: the default scaled ×{factor:.4g} to the data's force level"

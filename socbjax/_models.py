@@ -62,10 +62,26 @@ class FitModel:
     parameters: dict[str, Parameter]
     groups: dict[str, np.ndarray]
 
+    # The builder option that scales the model (all lengths with it) and the fraction of it the
+    # path can typically follow before a node crosses the surface (there is no contact model):
+    # used to suggest a model large enough for a curve.  None: no such option.
+    size_option: str | None = None
+    reach_fraction: float = 1.0
+
     @property
     def gap(self) -> float:
         """Largest probe travel the model can reach (µm): the probe–surface distance."""
         return probe_gap(self.base)
+
+    def size_for(self, reach: float) -> float | None:
+        """A value of :attr:`size_option` (µm, rounded up) whose model can typically be
+        compressed by ``reach`` µm before its nodes cross the surface; None if the model has
+        no size option."""
+        if self.size_option is None:
+            return None
+        need = float(reach) / self.reach_fraction
+        step = 10.0 ** np.floor(np.log10(need)) / 5  # round up to 2 significant digits, even: 1.2, 1.4, .., 12, 14
+        return float(np.ceil(need / step) * step)
 
     def describe(self) -> str:
         lines = [f"{self.name}: {self.base.n_nodes} nodes, {self.base.n_segments} segments, {self.base.n_junctions} junctions"]
@@ -104,6 +120,7 @@ class ColumnModel(FitModel):
     last node toward the first (:func:`socbjax.column`)."""
 
     name = "column"
+    size_option, reach_fraction = "length", 0.35  # clamped–pinned: a node crosses a support plane at u ≈ 0.39 L
 
     def __init__(self, n_nodes: int = 5, *, length: float = 1.0, supports=("clamped", "pinned"), dim: int = 2):
         self.base = probe_network(column(n_nodes, length=length, EI=_ACTIN_EI, supports=supports, dim=dim))
@@ -113,11 +130,21 @@ class ColumnModel(FitModel):
 
 class UnitMeshModel(FitModel):
     """The unit dendritic mesh (:func:`socbjax.unit_dendritic_mesh`) with a differentiable
-    branch angle; ``branch_angle`` (deg) here is only the default / topology angle."""
+    branch angle; ``branch_angle`` (deg) here is only the default / topology angle.
+
+    ``mother_length`` (µm) sets the size: the mesh is the same shape at every size (forces
+    scale as EI/mother_length², displacements with mother_length).  ``segment_length`` (µm,
+    default a quarter of the mother: 0.25 µm at the default 1 µm) is the node spacing.  The
+    path can be followed to about 0.3–0.44 × mother_length of compression (70°: 0.43) before
+    a node crosses the surface (there is no contact model)."""
 
     name = "unit-mesh"
+    size_option, reach_fraction = "mother_length", 0.3  # crossing at 0.29 L (80°) .. 0.44 L (55°)
 
-    def __init__(self, *, branch_angle: float = 70.0, mother_length: float = 1.0, segment_length: float = 0.25, dim: int = 2):
+    def __init__(self, *, branch_angle: float = 70.0, mother_length: float = 1.0, segment_length: float | None = None,
+                 dim: int = 2):
+        if segment_length is None:
+            segment_length = 0.25 * mother_length
         self.base = unit_dendritic_mesh(
             EI=_ACTIN_EI, branch_angle=branch_angle, mother_length=mother_length, segment_length=segment_length, dim=dim
         )
@@ -209,7 +236,22 @@ def make_fit_model(model, **options) -> FitModel:
         return model
     if model not in FIT_MODELS:
         raise ValueError(f"unknown model {model!r}; use one of {sorted(FIT_MODELS)} or a socbjax.FitModel")
+    known = _builder_options(model)
+    unknown = sorted(set(options) - set(known))
+    if unknown:
+        raise ValueError(f"unknown option(s) {', '.join(map(repr, unknown))} for the {model} model; it takes "
+                         f"{', '.join(known)}")
     try:
         return FIT_MODELS[model](**options)
     except TypeError as err:
         raise ValueError(f"invalid option for the {model} model: {err}") from None
+
+
+def _builder_options(model: str) -> list[str]:
+    """The keyword options a built-in model takes (the outcrop: those of dendritic_outcrop but EI)."""
+    import inspect
+
+    target = dendritic_outcrop if model == "outcrop" else FIT_MODELS[model].__init__
+    names = [n for n, p in inspect.signature(target).parameters.items()
+             if n != "self" and p.kind in (p.POSITIONAL_OR_KEYWORD, p.KEYWORD_ONLY)]
+    return [n for n in names if n != "EI"]

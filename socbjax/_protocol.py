@@ -18,7 +18,6 @@ from __future__ import annotations
 
 import dataclasses
 import hashlib
-import sys
 import time
 import warnings
 from pathlib import Path
@@ -30,12 +29,18 @@ import numpy as np
 from jax.flatten_util import ravel_pytree
 
 from ._path import PathProblem, PathSettings, StepRecorder, follow_path, path_weights, start_path
+from ._probe import observe
+from ._progress import Progress
 from ._residual import Control
 from ._solution import RESULTS, result_name
 
-__all__ = ["UNLOAD_MARGIN", "Checkpoint", "phase_problem", "settled_displacement", "run_phases", "Progress"]
+__all__ = ["UNLOAD_MARGIN", "CHUNK_SECONDS", "Checkpoint", "phase_problem", "settled_displacement", "run_phases"]
 
 UNLOAD_MARGIN = 1e-4  # unloading ends at u0 + margin × (travel − u0)
+# Wall time aimed at by one compiled chunk of the path while progress is reported: half a
+# second, so that the time per step may double (rejections, slow Newton) and the report still
+# moves every second.
+CHUNK_SECONDS = 0.5
 
 
 @dataclasses.dataclass(frozen=True)
@@ -82,39 +87,10 @@ def settled_displacement(model, x) -> jax.Array:
 
 @eqx.filter_jit
 def _chunk(problem, state, settings, inner, recorder, chunk):
-    return follow_path(problem, state, settings, inner, recorder, stop_after=chunk)
-
-
-class Progress:
-    """Progress of a long run: a bar on stderr (``progress=True``: compilation, then steps,
-    displacement and elapsed time), or a user callable ``progress(phase, u, steps, done)``
-    called between chunks of the path (phase name, probe displacement µm, accepted steps)."""
-
-    def __init__(self, progress, total: float):
-        self.callback = progress if callable(progress) else None
-        self.enabled = bool(progress) and self.callback is None
-        self.total, self.t0 = total, time.perf_counter()
-
-    @property
-    def active(self) -> bool:
-        return self.enabled or self.callback is not None
-
-    def say(self, text: str) -> None:
-        if self.enabled:
-            sys.stderr.write(text + "\n")
-            sys.stderr.flush()
-
-    def __call__(self, phase: str, u: float, steps: int, done: bool = False):
-        if self.callback is not None:
-            self.callback(phase, u, steps, done)
-            return
-        if not self.enabled:
-            return
-        frac = min(max(u / self.total, 0.0), 1.0) if self.total else 1.0
-        bar = "#" * int(30 * frac)
-        elapsed = time.perf_counter() - self.t0
-        sys.stderr.write(f"\r{phase:>9s} [{bar:<30s}] u = {u:8.4f} µm  steps {steps:5d}  {elapsed:6.1f} s" + ("\n" if done else ""))
-        sys.stderr.flush()
+    """At most ``chunk`` more accepted steps (a traced count: every chunk length runs the same
+    compiled program), and the probe force (pN) at the last one, for the progress report."""
+    state = follow_path(problem, state, settings, inner, recorder, stop_after=chunk)
+    return state, observe(problem.model, state.x[None], problem.model.network.loads)[4][0]
 
 
 def _fingerprint(model, u_max, unload, settings) -> str:
@@ -166,7 +142,9 @@ class _Run:
         self.recorder = StepRecorder(settings.max_steps)
         self.names = ["settle", "loading"] + (["unloading"] if unload else [])
         self.progress, self.checkpoint = progress, checkpoint
-        self.chunk = checkpoint.every if checkpoint else (25 if progress.active else settings.max_steps)
+        # Reported runs start with one step (the first chunk compiles: the bar appears right after)
+        # and adapt the length to CHUNK_SECONDS; others run whole (or checkpoint to checkpoint).
+        self.chunk = 1 if progress.active else (checkpoint.every if checkpoint else settings.max_steps)
         self.fingerprint = _fingerprint(model, u_max, unload, settings)
         self.start, self.saved, self.extra, self.parts = 0, None, {}, []
 
@@ -231,17 +209,28 @@ class _Run:
         state = _from_named(template, self.saved, self.checkpoint.path) if resumed else template
         ends = (0.0, 0.0) if index == 0 else ((u0, self.u_max) if index == 1 else (self.u_max, u0 + UNLOAD_MARGIN * (self.u_max - u0)))
         settings = self.settings.traced()
-        first = True
+        every = self.checkpoint.every if self.checkpoint else None
+        next_save = int(state.steps) + every if every else None
         while True:
-            if first and not resumed:
-                self.progress.say(f"{self.names[index]:>9s}: compiling and running the first {self.chunk} steps ...")
-            state = _chunk(problem, state, settings, self.inner, self.recorder, jnp.asarray(self.chunk))
-            done = bool(state.done) or int(state.steps) >= self.settings.max_steps
-            self.progress(self.names[index], ends[0] + float(state.p) * (ends[1] - ends[0]), int(state.steps), done)
-            first = False
+            before, t = int(state.steps), time.perf_counter()
+            length = self.chunk if next_save is None else max(min(self.chunk, next_save - before), 1)
+            state, force = _chunk(problem, state, settings, self.inner, self.recorder, jnp.asarray(length, jnp.int32))
+            steps = int(state.steps)  # waits for the chunk
+            self._adapt(steps - before, time.perf_counter() - t)
+            done = bool(state.done) or steps >= self.settings.max_steps
+            if not done and next_save is not None and steps >= next_save:  # saved before reporting: an
+                self._save(index, state)  # interrupt in the report loses nothing
+                next_save = steps + every
+            self.progress(self.names[index], ends[0] + float(state.p) * (ends[1] - ends[0]), steps, float(force), done)
             if done:
                 return state
-            self._save(index, state)
+
+    def _adapt(self, steps: int, seconds: float) -> None:
+        """The next chunk's length: CHUNK_SECONDS at the last chunk's time per step, at most 4×
+        the last length (the first chunk's time includes compilation: it only shortens)."""
+        if self.progress.active:
+            target = CHUNK_SECONDS * max(steps, 1) / max(seconds, 1e-6)
+            self.chunk = int(max(1, min(target, 4 * self.chunk, self.settings.max_steps)))
 
     def run(self):
         result = RESULTS.successful
@@ -272,5 +261,8 @@ def run_phases(model, u_max, unload, settings, inner, *, progress=None, checkpoi
     elif checkpoint and checkpoint.resume:
         warnings.warn(f"resume=True but there is no checkpoint at {checkpoint.path}: starting from the beginning",
                       stacklevel=3)
-    result = run.run()
+    try:
+        result = run.run()
+    finally:  # also on an error or Ctrl-C: the ticker stops, the line ends
+        run.progress.close()
     return concat(run.parts), run.extra, result

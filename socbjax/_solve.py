@@ -252,8 +252,8 @@ def _check(solution: Solution, settings: PathSettings, network: Network) -> Solu
     if bool(failed):
         raise ConvergenceError(
             f"solve did not converge: {result_message(solution.result)}; reached load factor "
-            f"{float(solution.load_factor):.4g} of 1 after {int(solution.steps)} steps "
-            f"({int(solution.cutbacks)} cut-backs), residual {float(solution.residual_norm):.2e}. "
+            f"{float(solution.load_factor):.4g} of 1 after {int(solution.steps)} step{'' if int(solution.steps) == 1 else 's'} "
+            f"({int(solution.cutbacks)} cut-back{'' if int(solution.cutbacks) == 1 else 's'}), residual {float(solution.residual_norm):.2e}. "
             "Try more nodes, a smaller PathSettings(initial_step=...), or throw=False to inspect."
             + _atol_hint(settings, network)
         )

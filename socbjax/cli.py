@@ -1,6 +1,10 @@
-"""Command line: ``socbjax demo | simulate | plot | fit`` (also ``python -m socbjax ...``).
+"""Command line: ``socbjax demo | simulate | plot | fit | examples`` (also ``python -m socbjax ...``).
 
 Units everywhere: µm, pN, s; EI in pN·µm²; angles in degrees on the command line.
+
+Only the standard library is imported at module level and before the arguments are parsed
+and checked: ``--help`` and argument errors answer at once, JAX (seconds to import) and the
+solver load only for a command that runs.
 """
 
 from __future__ import annotations
@@ -11,14 +15,18 @@ import signal
 import sys
 from pathlib import Path
 
-from ._cli_fit import add_fit_parser, run_fit
-from ._solution import ConvergenceError
+from ._cli_fit import add_fit_parser  # stdlib only at module level (socbjax fit's parser)
 
-__all__ = ["main"]
+__all__ = ["main", "build_parser"]
 
 # Defaults stop before the first node crosses the surface (no contact model yet): the unit mesh's mother at
 # u ≈ 0.40 µm, a free tip of the default 8-generation outcrop at u ≈ 0.23 µm.
 _DEFAULT_DISPLACEMENT = {"unit-mesh": 0.35, "outcrop": 0.2, "column": None}
+# The column's supports (socbjax.SUPPORTS, here without importing the solver); its default is
+# fit's: a clamped–pinned column (Euler load 20.19 EI/L²) crosses the surface at u ≈ 0.39 L,
+# after the default travel of 0.3 L.
+_SUPPORT_KINDS = ("clamped", "pinned", "free")
+_DEFAULT_SUPPORTS = "clamped,pinned"
 
 
 def _add_demo(sub) -> None:
@@ -75,13 +83,20 @@ def _add_simulate(sub) -> None:
         default=None,
         help="lateral force on the middle of each strand in pN (default: the builder's, or 1e-4 EI/L²)",
     )
-    sim.add_argument("--dim", type=int, choices=[2, 3], default=3, help="2 (planar) or 3 (spatial; default)")
+    sim.add_argument(
+        "--dim",
+        type=int,
+        choices=[2, 3],
+        default=None,
+        help="2 (planar) or 3 (spatial); default: 2 for the planar unit-mesh and column, 3 for the outcrop",
+    )
     sim.add_argument("--nodes", type=int, default=9, help="column: number of nodes (default 9)")
     sim.add_argument("--length", type=float, default=1.0, help="column: length in µm (default 1)")
     sim.add_argument(
         "--supports",
-        default="pinned,pinned",
-        help="column: supports of first,last node among clamped/pinned/free (default pinned,pinned)",
+        default=_DEFAULT_SUPPORTS,
+        help=f"column: supports of the first,last node, each one of {', '.join(_SUPPORT_KINDS)} "
+        f"(default {_DEFAULT_SUPPORTS})",
     )
     sim.add_argument(
         "--max-step", type=float, default=None, help="largest continuation step in µm (default 0.05, ≤ displacement/4)"
@@ -98,6 +113,29 @@ def _add_simulate(sub) -> None:
     sim.add_argument("--resume", action="store_true", help="continue an interrupted run from OUT.ckpt.h5")
     sim.add_argument("--figures", default=None, help="also write the figures (PNG) into this folder")
     sim.add_argument("--quiet", action="store_true", help="no progress bar")
+
+
+def _add_examples(sub) -> None:
+    ex = sub.add_parser(
+        "examples",
+        help="list the example AFM force curves shipped with socbjax, or print one's path",
+        description="Real AFM force curves shipped as package data (from afmformats' test data, MIT/CC0): "
+        "without NAME, one line per file (name, what it is, path); with NAME, only its path, for use as "
+        'socbjax fit "$(socbjax examples NAME)" ...',
+    )
+    ex.add_argument("name", nargs="?", default=None, help="a file name from the list (prints its path)")
+
+
+def _examples(args) -> int:
+    from ._examples import example_descriptions, example_file, example_files
+
+    if args.name is not None:
+        print(example_file(args.name))  # ValueError (one line, exit 2) names the available files
+        return 0
+    for name, path in example_files().items():
+        print(f"{name}\n    {example_descriptions()[name]}\n    {path}")
+    print("read them with socbjax.load_curve or socbjax fit (JPK, Asylum and .tab files need: pip install \".[afm]\")")
+    return 0
 
 
 def _add_plot(sub) -> None:
@@ -124,9 +162,35 @@ def _parser() -> argparse.ArgumentParser:
     _add_simulate(sub)
     _add_plot(sub)
     add_fit_parser(sub)
+    _add_examples(sub)
     for command in sub.choices.values():  # --debug also after the command (SUPPRESS keeps the global one)
         command.add_argument("--debug", action="store_true", default=argparse.SUPPRESS, help=argparse.SUPPRESS)
     return parser
+
+
+def _supports(text: str) -> tuple[str, str]:
+    """``--supports first,last`` as a pair of support names (ValueError naming the fix)."""
+    names = tuple(s.strip() for s in text.split(","))
+    if len(names) != 2 or not all(n in _SUPPORT_KINDS for n in names):
+        raise ValueError(f"--supports expects two comma-separated supports first,last, each one of "
+                         f"{', '.join(_SUPPORT_KINDS)} (e.g. --supports {_DEFAULT_SUPPORTS}); got {text!r}")
+    return names
+
+
+def _check_simulate(args) -> None:
+    """The values argparse cannot check, before anything is imported or computed."""
+    if args.max_step is not None and not (math.isfinite(args.max_step) and args.max_step > 0):
+        raise ValueError(f"--max-step must be a positive finite step in µm, got {args.max_step}")
+    if args.checkpoint_every < 1:
+        raise ValueError(f"--checkpoint-every must be a positive number of steps, got {args.checkpoint_every}")
+    if args.network == "column":
+        _supports(args.supports)
+    if args.dim is None:  # the unit mesh (Fig. 6a) and a column are planar problems; the outcrop grows in 3D
+        args.dim = 3 if args.network == "outcrop" else 2
+
+
+def _plural(n: int, noun: str) -> str:
+    return f"{n} {noun}{'' if n == 1 else 's'}"
 
 
 def _build(args):
@@ -134,7 +198,7 @@ def _build(args):
     import socbjax as sj
 
     if args.network == "column":
-        supports = tuple(s.strip() for s in args.supports.split(","))
+        supports = _supports(args.supports)
         EI = 1.0 if args.EI is None else args.EI
         net = sj.column(args.nodes, length=args.length, EI=EI, supports=supports, dim=args.dim)
         params = dict(
@@ -210,10 +274,6 @@ def _simulate(args) -> int:
 
     out = Path(args.out).expanduser()
     checkpoint = out.with_name(out.name + ".ckpt.h5")
-    if args.max_step is not None and not (math.isfinite(args.max_step) and args.max_step > 0):
-        raise ValueError(f"--max-step must be a positive finite step in µm, got {args.max_step}")
-    if args.checkpoint_every < 1:
-        raise ValueError(f"--checkpoint-every must be a positive number of steps, got {args.checkpoint_every}")
     _check_outputs(args, out, checkpoint)
     net, params, default_u = _build(args)
     displacement = default_u if args.displacement is None else args.displacement
@@ -222,8 +282,9 @@ def _simulate(args) -> int:
     with output_lock(out):  # a second run on the same --out refuses instead of deleting our checkpoints
         _check_checkpoint(args, checkpoint)
         print(
-            f"socbjax simulate {args.network}: {net.n_nodes} nodes, {net.n_segments} segments, "
-            f"{net.n_junctions} junctions; probe travel {displacement} µm{' and back' if args.unload else ''}",
+            f"socbjax simulate {args.network}: {_plural(net.n_nodes, 'node')}, {_plural(net.n_segments, 'segment')}, "
+            f"{_plural(net.n_junctions, 'junction')}; probe travel {displacement:g} µm"
+            f"{' and back' if args.unload else ''}",
             file=sys.stderr,
         )
         result = sj.compress(
@@ -273,11 +334,17 @@ def _plot(args) -> int:
 _USER_ERRORS = (ValueError, TypeError, OSError, ImportError)
 
 
+def build_parser() -> argparse.ArgumentParser:
+    """The ``socbjax`` argument parser (all subcommands; no JAX imported): e.g. to check a command
+    line without running it, ``build_parser().parse_args(["simulate", "column", "--out", "c.h5"])``."""
+    return _parser()
+
+
 def main(argv: list[str] | None = None) -> int:
     """Run the command line; returns the exit status (0 success, 1 the run did not complete or
     the fit did not converge, 2 a user error, printed as one line ``socbjax: error: ...``;
     ``--debug`` shows the traceback instead)."""
-    args = _parser().parse_args(argv)
+    args = _parser().parse_args(argv)  # before any import of JAX: --help and argument errors answer at once
     if hasattr(signal, "SIGXFSZ"):  # over a file-size limit, writes fail with EFBIG (an OSError) instead of killing us
         signal.signal(signal.SIGXFSZ, signal.SIG_IGN)
     try:
@@ -287,16 +354,23 @@ def main(argv: list[str] | None = None) -> int:
             raise
         print(f"socbjax: error: {_one_line(err)}", file=sys.stderr)
         return 2
-    except ConvergenceError as err:  # the problem has no answer at these inputs: said in one line too
-        if args.debug:
-            raise
-        print(f"socbjax: error: {_one_line(err)}", file=sys.stderr)
-        return 1
     except KeyboardInterrupt:
         if args.debug:
             raise
         print("socbjax: interrupted", file=sys.stderr)
         return 130
+    except Exception as err:
+        if args.debug or not _is_convergence_error(err):
+            raise
+        print(f"socbjax: error: {_one_line(err)}", file=sys.stderr)  # no answer at these inputs: one line too
+        return 1
+
+
+def _is_convergence_error(err: BaseException) -> bool:
+    """Whether ``err`` is a :class:`socbjax.ConvergenceError` (only raised once the solver is
+    imported: looked up there, so that this module imports no JAX)."""
+    solution = sys.modules.get("socbjax._solution")
+    return solution is not None and isinstance(err, solution.ConvergenceError)
 
 
 def _one_line(err: BaseException) -> str:
@@ -307,6 +381,12 @@ def _one_line(err: BaseException) -> str:
 
 
 def _dispatch(args) -> int:
+    if args.command == "examples":
+        return _examples(args)  # no JAX, no cache
+    if args.command == "simulate":
+        _check_simulate(args)
+    if args.command == "plot":
+        _steps(args.steps)
     from ._cache import enable_compilation_cache
 
     enable_compilation_cache()  # a second run of the same network does not recompile ($SOCBJAX_CACHE_DIR, "off")
@@ -320,6 +400,8 @@ def _dispatch(args) -> int:
     if args.command == "plot":
         return _plot(args)
     if args.command == "fit":
+        from ._cli_fit import run_fit
+
         return run_fit(args)
     return 2  # pragma: no cover - argparse enforces the choices
 

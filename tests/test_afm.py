@@ -3,14 +3,14 @@ spring constant and force law; unit conversions; the real afmformats test files;
 
 import os
 import sys
-from pathlib import Path
 
 import numpy as np
 import pytest
 
-from socbjax._afm import ForceCurve, load_curve, save_curve
+import socbjax
+from socbjax import ForceCurve, load_curve, save_curve
 
-DATA = Path(__file__).parent / "data" / "afm"
+DATA = socbjax.example_file("force-save-example.jpk-force").parent
 K = 0.05  # N/m
 C0 = 1.0  # contact tip position, µm
 SPACING = 0.005  # µm between tip positions (JPK-like)

@@ -34,6 +34,54 @@ def test_python_dash_m_entry_point():
     assert out.returncode == 0 and "demo" in out.stdout
 
 
+_NO_JAX = """
+import sys, socbjax.cli
+try:
+    code = socbjax.cli.main(sys.argv[1:])
+except SystemExit as exc:
+    code = exc.code
+print(code, sorted(m for m in sys.modules if m.split(".")[0] in ("jax", "jaxlib")))
+"""
+
+
+@pytest.mark.parametrize("argv, code", [
+    (["--help"], 0), (["simulate", "--help"], 0), (["fit", "--help"], 0), (["simulate", "nope", "--out", "x.h5"], 2),
+    (["simulate", "unit-mesh", "--dim", "5", "--out", "x.h5"], 2),
+    (["simulate", "column", "--supports", "pinned/free", "--out", "x.h5"], 2),
+    (["simulate", "column", "--max-step", "-1", "--out", "x.h5"], 2), (["plot", "x.h5", "--steps", "1,x"], 2),
+])
+def test_help_and_argument_errors_do_not_import_jax(tmp_path, argv, code):
+    """--help and argument errors answer before JAX (seconds to import) is loaded."""
+    out = subprocess.run([sys.executable, "-c", _NO_JAX, *argv], capture_output=True, text=True, timeout=120,
+                         cwd=tmp_path)
+    assert out.stdout.strip().splitlines()[-1] == f"{code} []", (out.stdout[-2000:], out.stderr[-2000:])
+
+
+def test_package_import_is_light_and_still_float64():
+    code = ("import sys, socbjax; light = 'jax' not in sys.modules; "
+            "import jax.numpy as jnp; from socbjax import solve; "
+            "print(light, jnp.zeros(2).dtype, socbjax.__version__ == socbjax._version.__version__, callable(solve), "
+            "socbjax.testing.elastica_cantilever.__name__, sorted(set(socbjax.__all__) - set(dir(socbjax))))")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=300)
+    assert out.stdout.split() == ["True", "float64", "True", "True", "elastica_cantilever", "[]"], out.stderr[-2000:]
+
+
+def test_python_dash_m_help_imports_no_jax():
+    out = subprocess.run([sys.executable, "-X", "importtime", "-m", "socbjax", "--help"], capture_output=True,
+                         text=True, timeout=120)
+    modules = [line.rsplit("|", 1)[-1].strip() for line in out.stderr.splitlines() if line.startswith("import time:")]
+    assert out.returncode == 0 and "socbjax.cli" in modules, out.stderr[-2000:]
+    assert not [m for m in modules if m.split(".")[0] in ("jax", "jaxlib")]
+
+
+def test_column_supports_default_and_separator_match_fit():
+    args = socbjax.cli._parser().parse_args(["simulate", "column", "--out", "x.h5"])
+    assert args.supports == "clamped,pinned"
+    assert socbjax.cli._supports(" clamped , free ") == ("clamped", "free")
+    assert socbjax.cli._SUPPORT_KINDS == socbjax.SUPPORTS  # the solver's names, without importing it
+    assert [socbjax.cli._plural(n, "junction") for n in (0, 1, 2)] == ["0 junctions", "1 junction", "2 junctions"]
+
+
 def test_simulate_help_documents_units(capsys):
     try:
         socbjax.cli.main(["simulate", "--help"])
@@ -49,9 +97,11 @@ def test_simulate_column_then_plot(tmp_path, capsys):
     out = tmp_path / "column.h5"
     code = socbjax.cli.main(["simulate", "column", "--dim", "2", "--nodes", "5", "--displacement", "0.2", "--out", str(out), "--quiet"])
     assert code == 0 and out.exists()
-    assert "completed" in capsys.readouterr().out
+    captured = capsys.readouterr()
+    assert "completed" in captured.out and "5 nodes, 4 segments, 0 junctions; probe travel 0.2 µm and back" in captured.err
     result = socbjax.load(out)
     assert result.completed and result.parameters["network"] == "column" and (result.phase == 2).any()
+    assert result.parameters["supports"] == ["clamped", "pinned"]  # the default, as fit's
     assert not (tmp_path / "column.h5.ckpt.h5").exists()  # removed after a completed run
     assert socbjax.cli.main(["plot", str(out), "--out", str(tmp_path / "figs")]) == 0
     pngs = sorted(p.name for p in (tmp_path / "figs").glob("*.png"))
@@ -71,6 +121,8 @@ def _user_error(capsys, argv) -> str:
 
 @pytest.mark.parametrize("argv, words", [
     (["simulate", "column", "--supports", "pinned,glued", "--out", "{tmp}/c.h5"], ["glued"]),
+    (["simulate", "column", "--supports", "clamped/pinned", "--out", "{tmp}/c.h5"],
+     ["--supports", "'clamped/pinned'", "clamped,pinned"]),
     (["simulate", "column", "--nodes", "1", "--out", "{tmp}/c.h5"], ["n_nodes", "1"]),
     (["simulate", "column", "--out", "{tmp}/missing/c.h5"], ["--out", "does not exist"]),
     (["simulate", "column", "--out", "{tmp}"], ["--out", "folder"]),
@@ -145,3 +197,15 @@ def test_a_full_disk_gives_one_line_and_keeps_the_previous_output(tmp_path):
     assert last.startswith("socbjax: error: ") and str(out) in last and "Traceback" not in proc.stderr, proc.stderr[-2000:]
     assert out.read_bytes() == b"the previous output"
     assert not [p for p in tmp_path.iterdir() if p.name.endswith(".tmp")]
+
+
+def test_examples_lists_the_shipped_curves_and_prints_one_path(capsys):
+    assert socbjax.cli.main(["examples"]) == 0
+    listing = capsys.readouterr().out
+    for name, path in socbjax.example_files().items():
+        assert name in listing and str(path) in listing
+    name = "fmt-igor-fd_SiN_FD_plot.ibw"
+    assert socbjax.cli.main(["examples", name]) == 0
+    assert capsys.readouterr().out.strip() == str(socbjax.example_file(name))
+    assert socbjax.cli.main(["examples", "nope"]) == 2
+    assert "choose one of force-save-example.jpk-force" in capsys.readouterr().err

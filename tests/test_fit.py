@@ -41,6 +41,7 @@ def test_recovers_EI_and_branch_angle_from_noisy_curves(unit_mesh, seed):
         assert abs(result.values[name] - TRUTH[name]) <= 3 * result.standard_errors[name], result.summary()
     assert result.rms == pytest.approx(np.sqrt(np.mean((0.02 * F) ** 2)), rel=0.35)  # residuals ≈ the noise
     assert result.history[0]["loss"] > result.loss
+    assert not any("systematic" in w for w in result.warnings)  # the right model leaves noise only
 
 
 @pytest.mark.slow
@@ -167,3 +168,30 @@ def test_a_fit_that_explains_nothing_is_not_converged():
     assert result.converged is False and result.result in (sj.RESULTS.poor_fit, sj.RESULTS.did_not_move)
     assert result.to_dict()["converged"] is False and result.to_dict()["result"] == "poor_fit"
     assert result.r_squared <= 0 and result.warnings and "R²" in result.message
+
+
+def test_a_curve_beyond_the_model_names_cause_and_python_fixes():
+    """Past the probe–surface gap (checked before any solve): a ValueError subclass naming the
+    gap, a model size that reaches and a crop, in this API's spelling."""
+    c, F = np.linspace(0.01, 2.0, 8), np.linspace(1.0, 2.0, 8)
+    with pytest.raises(ValueError) as err:
+        sj.fit((c, F), "unit-mesh")
+    text = str(err.value)
+    assert err.value.cause == "gap" and "probe–surface gap" in text
+    assert "model_options={'mother_length': 6.8}" in text and "curve.select(max_compression=0.27)" in text
+    assert "--" not in text  # no command-line option
+    with pytest.raises(ValueError, match=r"model_options=\{'length': 5.8\}"):
+        sj.fit((c, F), "column")
+
+
+@pytest.mark.slow
+def test_surface_crossing_inside_the_data_is_diagnosed():
+    """Data to 0.6 µm on the 1-µm unit mesh (70°): its nodes cross the surface at ≈ 0.43 µm,
+    before the data end — refused at the start, naming the crossing and the fixes (not
+    "use method='arclength'", which would cross the surface too)."""
+    c = np.linspace(0.01, 0.6, 12)
+    with pytest.raises(ValueError) as err:
+        sj.fit((c, np.ones(12)), "unit-mesh")
+    assert err.value.cause == "surface" and 0.4 < err.value.limit < 0.46
+    assert "cross the surface" in str(err.value) and "arclength" not in str(err.value)
+    assert "model_options={'mother_length': 2}" in str(err.value)

@@ -66,3 +66,38 @@ def test_column_model_and_errors():
     with pytest.raises(ValueError, match="unknown model"):
         sj.make_fit_model("cube")
     assert sj.make_fit_model(model) is model
+
+
+def test_unit_mesh_scales_with_its_mother_length():
+    """mother_length sets the size only: segment_length defaults to a quarter of the mother, so
+    a 12-µm mesh is the 1-µm mesh magnified 12× (same nodes, every length ×12), and its gap
+    (the probe travel to the surface) is the mother's length."""
+    small, large = UnitMeshModel(dim=2), UnitMeshModel(dim=2, mother_length=12.0)
+    assert large.base.n_segments == small.base.n_segments and large.gap == pytest.approx(12.0)
+    for values in ({}, {"branch_angle": 55.0}):
+        a, b = small.network(values), large.network(values)
+        np.testing.assert_allclose(np.asarray(b.positions), 12.0 * np.asarray(a.positions), atol=1e-12)
+        np.testing.assert_allclose(np.asarray(b.lengths), 12.0 * np.asarray(a.lengths), rtol=1e-12)
+        np.testing.assert_allclose(np.asarray(b.tangents), np.asarray(a.tangents), atol=1e-12)
+    assert UnitMeshModel(dim=2, mother_length=2.0, segment_length=0.25).base.n_segments > small.base.n_segments
+
+
+def test_size_suggestion_reaches_the_data():
+    """size_for(reach): a model size whose typical followable range (0.3 × the mother, 0.35 ×
+    the column, whose nodes cross a support plane at 0.39 L) covers the reach, rounded up to
+    two significant digits."""
+    mesh, col = UnitMeshModel(dim=2), ColumnModel(3)
+    assert (mesh.size_option, col.size_option) == ("mother_length", "length")
+    for reach in (0.05, 0.889, 3.365, 40.0):
+        size = mesh.size_for(reach)
+        assert 0.3 * size >= reach and 0.3 * size < 1.1 * reach
+        assert 0.35 * col.size_for(reach) >= reach
+    assert mesh.size_for(3.365) == 12.0 and mesh.size_for(0.889) == 3.0
+    assert OutcropModel(generations=2, gap=3.0, dim=3).size_for(1.0) is None
+
+
+def test_unknown_model_options_are_listed():
+    with pytest.raises(ValueError, match=r"unknown option\(s\) 'mother' for the unit-mesh model; it takes .*mother_length"):
+        sj.make_fit_model("unit-mesh", mother=2.0)
+    with pytest.raises(ValueError, match=r"'n'.* it takes n_nodes, length, supports, dim"):
+        sj.make_fit_model("column", n=3)
