@@ -177,6 +177,7 @@ def test_shallow_shipped_curves_fit_the_default_mesh(tmp_path, name):
     assert out.with_suffix(".png").exists()
 
 
+@pytest.mark.slow  # the default suite fits the shipped JPK curve on the command line
 def test_native_csv_fit_with_supports_like_simulate(tmp_path):
     """A pinned–pinned column simulated, written as CSV, fitted with `--supports pinned,pinned`
     (the convention of `socbjax simulate column --supports`): EI recovered exactly, from the

@@ -107,6 +107,7 @@ def test_sampled_ensemble_under_jit_grad_jacfwd_vmap():
 
 
 # ---------------------------------------------------------------------------- fit losses
+@pytest.mark.slow  # every fit in the default suite differentiates these residuals under jit (jacfwd)
 def test_fit_loss_under_jit_grad_jacfwd_vmap():
     model = sj.ColumnModel(4, supports=("pinned", "pinned"))
     c = np.linspace(0.02, 0.2, 6)
