@@ -181,6 +181,7 @@ def test_a_second_run_on_the_same_output_refuses(tmp_path, capsys):
         holder.wait()
 
 
+@pytest.mark.slow  # suite time; in the default suite: full disk and size limits of writes: tests/test_io.py
 def test_a_full_disk_gives_one_line_and_keeps_the_previous_output(tmp_path):
     """With a file-size limit below the result's size (as on a full disk) the run ends with
     a one-line OSError and exit 2 — no signal, no traceback — the previous output intact."""

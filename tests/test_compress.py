@@ -140,6 +140,7 @@ def test_unit_mesh_buckles_collapses_and_recovers():
     np.testing.assert_allclose(F_back, F[window], rtol=1e-2)
 
 
+@pytest.mark.slow  # suite time; in the default suite: sparse = dense solves and Newton: tests/test_linear.py
 def test_outcrop_sparse_and_dense_paths_agree_and_balance():
     net = sj.dendritic_outcrop(generations=5, gap=3.0, dim=2, seed=2)
     assert len(np.asarray(net.position_projector)) == net.n_nodes

@@ -63,6 +63,7 @@ def test_force_scales_with_EI(outcrop_ensemble):
     np.testing.assert_allclose(ens.displacement, ens.displacement[[1]].repeat(len(SCALES), 0), atol=1e-12)
 
 
+@pytest.mark.slow  # suite time; in the default suite: no-retrace checks: tests/test_tracing.py
 def test_new_values_do_not_recompile(outcrop_ensemble, traces):
     """All phases share one compiled program; new EI, loads and displacement reuse it, a new
     batch size traces once more (which shows that the counter is live)."""

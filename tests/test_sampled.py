@@ -121,6 +121,7 @@ def test_column_gradient_matches_finite_differences_past_buckling():
     np.testing.assert_allclose(implicit, _central(loss, theta), rtol=1e-6, atol=1e-6 * np.abs(implicit).max())
 
 
+@pytest.mark.slow  # suite time; in the default suite: sampling through a fold: the other tests of this file
 def test_unloading_samples_retrace_loading():
     """The unit mesh's collapse is reversible: unloading samples equal loading ones."""
     at = jnp.array([0.05, 0.2, 0.4])

@@ -130,6 +130,7 @@ def test_too_tight_tolerance_on_a_long_chain_names_the_round_off_floor():
         sj.solve(net, {-1: [0.0, 0.02]}, settings=sj.PathSettings(atol=1e-14, linear_solver="sparse"))
 
 
+@pytest.mark.slow  # suite time; in the default suite: transposed sparse solves and jit/vmap: tests/test_linear.py
 def test_gradients_of_a_1000_segment_chain_with_the_sparse_solver():
     """d(tip)/d(EI) and d(tip)/d(P) of a 1,000-segment cantilever (6,004 unknowns) through the
     coloured sparse Jacobian + SuperLU (transposed solve for reverse mode), under jit: equal

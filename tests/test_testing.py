@@ -134,6 +134,7 @@ def test_buckled_branch_selected_by_guess(p, guess):
     assert float(sol.base_moment) == pytest.approx(2.0 * np.sqrt(p) * k, abs=1e-9)
 
 
+@pytest.mark.slow  # suite time; in the default suite: the reference itself: the other tests of this file
 @pytest.mark.parametrize("root_finder", ["auto", "bracketing"])
 def test_bracketing_fallback_finds_same_solution(root_finder):
     # At PL²/EI = 10, m(L) is non-monotone in m(0) and Newton from 6.0 leaves its basin;
@@ -192,6 +193,7 @@ def test_float32_mode_raises_clear_error():
 
 
 # ------------------------------------------------------------ kinked cantilever
+@pytest.mark.slow  # suite time; in the default suite: the reference itself: the other tests of this file
 def test_kinked_without_kink_reproduces_cantilever():
     F = np.array([0.7, -2.1])
     kinked = elastica_kinked_cantilever(F, lengths=(0.5, 0.5), kink_angle=0.0, n_output=6)

@@ -42,6 +42,7 @@ def test_solve_under_jit_grad_jacfwd_vmap():
     np.testing.assert_allclose(EIs * jax.vmap(jax.grad(_tip))(EIs, Ps), -Ps * batched, rtol=1e-8)
 
 
+@pytest.mark.slow  # suite time; in the default suite: solve under every transformation: test_solve_under_jit_grad_jacfwd_vmap; curve quantities: tests/test_equilibrium.py
 def test_solve_with_couples_and_curves_under_transformations():
     """θ_tip = M L/EI exactly (uniform curvature): its derivatives are L/EI and −M L/EI²."""
     def rotation(M, EI):

@@ -137,6 +137,7 @@ def test_post_buckling_follows_the_elastica(overload):
     assert relative_error(d, exact) < 1e-3
 
 
+@pytest.mark.slow  # suite time; in the default suite: the default order is checked by every elastica comparison
 def test_quadrature_order_is_configurable_and_converged_at_default():
     exact = exact_tip_displacement(0.0, 2.0)
     errors = {
