@@ -108,6 +108,7 @@ def test_junction_validation_errors():
         sj.make_network(pos, tan, np.vstack([segs, [[1, 5]]]), np.append(lengths, 0.5), 1.0, **kw)
 
 
+@pytest.mark.slow  # suite time; in the default suite: 3D rotation invariance of filaments (tests/test_spatial.py)
 def test_branched_network_is_rotation_equivariant(rng):
     """The 3D junction rule (minimal rotation of the reference pair) keeps the whole problem
     equivariant: rotating network and loads rotates the solution."""
