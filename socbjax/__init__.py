@@ -41,11 +41,16 @@ __all__ = [
     "coupling_matrix", "quintic_coefficients", "gauss_legendre",
     # fitting and data
     "fit", "fit_problem", "FitProblem", "FitRangeError", "FitResult", "FitSettings", "FitModel", "ColumnModel", "UnitMeshModel",
-    "OutcropModel", "FIT_MODELS", "make_fit_model", "Parameter", "NUISANCE_PARAMETERS", "ForceCurve", "load_curve",
+    "OutcropModel", "LawnModel", "check_dimension", "collect_curve_files", "read_curve", "FIT_MODELS", "make_fit_model", "Parameter", "NUISANCE_PARAMETERS", "ForceCurve", "load_curve",
     "save_curve", "example_files", "example_file", "example_descriptions",
+    # batch fits
+    "fit_batch", "BatchResult", "curve_from_result",
+    # goodness of fit and model comparison
+    "goodness_of_fit", "Goodness", "estimate_noise", "runs_test", "RunsTest", "lag1_autocorrelation",
+    "information_criteria", "compare_models", "ModelComparison",
     # files, figures, tooling
     "save", "load", "save_checkpoint", "load_checkpoint", "check_output_path", "output_lock", "atomic_path", "save_figures", "plot_force_curve", "plot_snapshots",
-    "plot_end_forces", "plot_strand_forces", "plot_fit", "save_fit_figure", "enable_compilation_cache",
+    "plot_end_forces", "plot_strand_forces", "plot_fit", "plot_lawn", "save_fit_figure", "enable_compilation_cache",
 ]
 
 _SUBMODULES = ("testing", "cli")  # ``socbjax.testing`` works without importing it first

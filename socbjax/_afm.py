@@ -59,12 +59,29 @@ from ._curve_files import (
     read_native,
 )
 
-__all__ = ["ForceCurve", "load_curve", "save_curve"]
+__all__ = ["ForceCurve", "hysteresis_energy", "load_curve", "save_curve"]
 
 _BASELINE_FRACTION = 0.5  # far part of the approach travel used for the baseline
 _MAX_BACKWARD = 0.25  # compression files: largest fraction of backward steps
 _SPLIT_RETURN = 0.1  # return travel (fraction) that marks an unlabelled retract
 _MIN_CONTACT_SNR = 10.0  # contact needs a force above this many noise levels
+
+
+def hysteresis_energy(c_approach, f_approach, c_retract, f_retract, n: int = 512) -> float:
+    """∫ F_approach dc − ∫ F_retract dc (pN·µm = aJ) over [0, the smaller of the two branches'
+    largest compressions], each branch sorted by compression and interpolated linearly on
+    ``n`` common points; NaN when the branches share no contact range."""
+    branches = []
+    for c, f in ((c_approach, f_approach), (c_retract, f_retract)):
+        c, f = np.asarray(c, float), np.asarray(f, float)
+        order = np.argsort(c, kind="stable")
+        branches.append((c[order], f[order]))
+    top = min(branches[0][0].max(), branches[1][0].max())
+    if not top > 0:
+        return float("nan")
+    grid = np.linspace(0.0, top, n)
+    a, r = (np.interp(grid, c, f) for c, f in branches)
+    return float(np.trapezoid(a - r, grid))
 
 
 @dataclass(frozen=True, eq=False)
@@ -124,6 +141,14 @@ class ForceCurve:
     def retract(self) -> ForceCurve:
         """The retract points (segment 1)."""
         return self._subset(self.segment == 1, "selecting the retract")
+
+    def hysteresis(self) -> float:
+        """Energy dissipated over the cycle (pN·µm = aJ): ∫ F_approach dc − ∫ F_retract dc over
+        the compressions in contact (c ≥ 0) that both branches cover; NaN without a retract."""
+        if not np.any(self.segment == 1) or not np.any(self.segment == 0):
+            return float("nan")
+        a, r = self.segment == 0, self.segment == 1
+        return hysteresis_energy(self.compression[a], self.force[a], self.compression[r], self.force[r])
 
     def select(self, max_compression: float | None = None,
                min_compression: float | None = None) -> ForceCurve:

@@ -12,9 +12,12 @@ _jax.config.update("jax_enable_x64", True)
 
 from ._adjoint import ImplicitAdjoint  # noqa: E402
 from ._afm import ForceCurve, load_curve, save_curve  # noqa: E402
+from ._batch import BatchResult, curve_from_result, fit_batch  # noqa: E402
+from ._curve_inputs import check_dimension, collect_curve_files, read_curve  # noqa: E402
 from ._buckling import buckling_load  # noqa: E402
 from ._builders import SUPPORTS, cantilever, column  # noqa: E402
 from ._cache import enable_compilation_cache  # noqa: E402
+from ._compare import ModelComparison, compare_models  # noqa: E402
 from ._compress import compress  # noqa: E402
 from ._curve import FilamentCurve  # noqa: E402
 from ._dendritic import dendritic_outcrop, unit_dendritic_mesh  # noqa: E402
@@ -24,11 +27,16 @@ from ._examples import example_descriptions, example_file, example_files  # noqa
 from ._figures import plot_end_forces, plot_force_curve, plot_snapshots, plot_strand_forces, save_figures  # noqa: E402
 from ._fit import FitResult, FitSettings, fit  # noqa: E402
 from ._fit_figure import plot_fit, save_fit_figure  # noqa: E402
+from ._lawn_figure import plot_lawn  # noqa: E402
 from ._fit_problem import FitProblem, FitRangeError, fit_problem  # noqa: E402
+from ._goodness import (  # noqa: E402
+    Goodness, RunsTest, estimate_noise, goodness_of_fit, information_criteria, lag1_autocorrelation, runs_test,
+)
 from ._io import atomic_path, check_output_path, load, load_checkpoint, output_lock, save, save_checkpoint  # noqa: E402
 from ._jointed import JointedModel, JointedState  # noqa: E402
 from ._linear import Bordered, ColouredSparseLU, DenseLU  # noqa: E402
 from ._models import FIT_MODELS, ColumnModel, FitModel, OutcropModel, UnitMeshModel, make_fit_model  # noqa: E402
+from ._lawn import LawnModel  # noqa: E402
 from ._network import Network, Topology, make_network  # noqa: E402
 from ._parameters import NUISANCE_PARAMETERS, Parameter  # noqa: E402
 from ._path import (  # noqa: E402

@@ -35,11 +35,13 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from ._afm import hysteresis_energy
 from ._fit_problem import BRANCHES, check_start, fit_problem, scaled_start
+from ._goodness import judge_fit
 from ._path import PathSettings
 from ._solution import RESULTS, ConvergenceError, result_name
 
-__all__ = ["fit", "FitResult", "FitSettings", "OPTIMIZERS"]
+__all__ = ["OPTIMIZERS", "FitResult", "FitSettings", "finite_json", "fit"]
 
 OPTIMIZERS = ("lm", "adam", "lbfgs")
 _CORRELATION_LIMIT = 0.995
@@ -52,7 +54,9 @@ class FitSettings:
     optimizer : "lm" (Levenberg–Marquardt, default), "adam" or "lbfgs" (optax).
     max_iterations, tolerance : optimiser limits (relative loss decrease / step size).
     learning_rate : Adam's step size in the unconstrained variables.
-    branch : "loading" (approach, default) or "unloading" (retract).
+    branch : "loading" (approach, default), "unloading" (retract) or "both" (a ForceCurve's
+        approach and retract together, one path; ``FitResult.goodness`` then holds the
+        hysteresis of data and model, ``hysteresis_data``/``hysteresis_model`` in pN·µm).
     max_points : curves with more points are averaged in this many compression bins.
     min_compression : drop points below this compression (µm); default for a ForceCurve
         −¼ of its maximum compression (some baseline before contact, not the whole approach).
@@ -110,6 +114,13 @@ class FitResult(eqx.Module):
     history : per iteration ``{"iteration", "loss", "values", "damping"}``.
     compression, force, model_force, residuals : [m] the data points fitted and the model.
     result : :class:`socbjax.RESULTS` item (``successful`` when ``converged``).
+    noise (pN), noise_source ("baseline", "sigma" or "residuals"), chi2_reduced, misfit, aic,
+        bic, n_parameters, goodness (every statistic): :func:`socbjax.goodness_of_fit`.  misfit
+        (structured residuals or too large a χ²; a warning "the model misfits the data
+        systematically: ..." gives the evidence) is independent of ``converged``.
+    comparison : a :class:`socbjax.ModelComparison` when ``fit(..., compare=...)``, else None.
+    realisation_errors : for models averaging random realisations (:class:`socbjax.LawnModel`):
+        each free parameter's standard error from the finite sample of realisations alone.
     """
 
     model: str
@@ -134,6 +145,16 @@ class FitResult(eqx.Module):
     n_evaluations: int
     elapsed_s: float
     result: RESULTS
+    noise: float = math.nan
+    noise_source: str = ""
+    chi2_reduced: float = math.nan
+    misfit: bool = False
+    aic: float = math.nan
+    bic: float = math.nan
+    n_parameters: int = 0
+    goodness: dict | None = None
+    comparison: object = None
+    realisation_errors: dict | None = None
 
     @property
     def residuals(self) -> np.ndarray:
@@ -144,20 +165,34 @@ class FitResult(eqx.Module):
                 f"rms {self.rms:.4g} pN, R² {self.r_squared:.3g}, over {plural(self.force.size, 'point')}")
         lines = [head]
         for name in self.names:
-            lines.append(f"  {name:<14s} = {self.values[name]:.6g} ± {self.standard_errors[name]:.2g} {self.units[name]}")
+            extra = (f"  (realisations: ± {self.realisation_errors[name]:.2g})"
+                     if self.realisation_errors and name in self.realisation_errors else "")
+            lines.append(f"  {name:<14s} = {self.values[name]:.6g} ± {self.standard_errors[name]:.2g} {self.units[name]}"
+                         + extra)
         fixed = [n for n in self.values if n not in self.names]
         if fixed:
             lines.append("  fixed: " + ", ".join(f"{n} = {self.values[n]:.4g} {self.units[n]}" for n in fixed))
+        g = self.goodness or {}
+        if "hysteresis_data" in g:
+            lines.append(f"  hysteresis (approach − retract work): data {g['hysteresis_data']:.4g}, model "
+                         f"{g['hysteresis_model']:.4g} pN·µm")
+        chi2_p = "not a test" if self.noise_source == "residuals" else f"p = {g.get('chi2_p', math.nan):.2g}"
+        lines.append(f"  goodness: noise {self.noise:.3g} pN (from the {self.noise_source}), χ²_red {self.chi2_reduced:.3g} "
+                     f"({chi2_p}), runs test p = {g.get('runs', {}).get('p_value', math.nan):.2g}; AIC {self.aic:.5g}, "
+                     f"BIC {self.bic:.5g}; " + ("MISFIT: the residuals are systematic" if self.misfit else "no systematic misfit"))
         lines.extend(f"  WARNING: {w}" for w in self.warnings)
+        if self.comparison is not None:
+            lines.append(self.comparison.table())
         return "\n".join(lines)
 
     def to_dict(self) -> dict:
-        out = {f.name: getattr(self, f.name) for f in dataclasses.fields(self) if f.name != "result"}
+        out = {f.name: getattr(self, f.name) for f in dataclasses.fields(self) if f.name not in ("result", "comparison")}
         out["result"] = result_name(self.result)
+        out["comparison"] = None if self.comparison is None else self.comparison.to_dict()
         for key in ("correlation", "covariance", "compression", "force", "model_force"):
             out[key] = np.asarray(out[key]).tolist()
         out["residuals"] = self.residuals.tolist()
-        return _finite_json(json.loads(json.dumps(out, default=float)))
+        return finite_json(json.loads(json.dumps(out, default=float)))
 
     def save(self, path) -> None:
         """Write the result as JSON, atomically (temporary file, then rename)."""
@@ -167,13 +202,13 @@ class FitResult(eqx.Module):
         atomic_path(path, lambda tmp: tmp.write_text(text))
 
 
-def _finite_json(value):
+def finite_json(value):
     """``value`` with every non-finite float replaced by None: strict JSON (no NaN or
     Infinity, e.g. the standard errors of a singular fit)."""
     if isinstance(value, dict):
-        return {k: _finite_json(v) for k, v in value.items()}
+        return {k: finite_json(v) for k, v in value.items()}
     if isinstance(value, list):
-        return [_finite_json(v) for v in value]
+        return [finite_json(v) for v in value]
     return None if isinstance(value, float) and not math.isfinite(value) else value
 
 
@@ -330,14 +365,14 @@ def _optimise(problem, settings: FitSettings, jac, report, bar):
             jac, problem.z0, settings.max_iterations, settings.tolerance, report, bar.rejected)
         return z, history, converged, message, evaluations
     bar.note(f"compiling the loss's gradient ({settings.optimizer})")
-    loss = lambda z: 0.5 * jnp.sum(problem.residuals(z) ** 2)  # noqa: E731
+    loss = lambda z: 0.5 * jnp.sum(problem.residuals(z) ** 2)
     return _optax(jax.jit(jax.value_and_grad(loss)), jax.jit(loss), problem.z0, settings.optimizer,
                   settings.max_iterations, settings.tolerance, settings.learning_rate, report)
 
 
 def fit(curve, model="unit-mesh", *, free=("EI",), fixed: dict | None = None, initial: dict | None = None,
         bounds: dict | None = None, sigma=None, settings: FitSettings | None = None, model_options: dict | None = None,
-        progress: bool = False) -> FitResult:
+        progress: bool = False, compare=None) -> FitResult:
     """Fit model parameters to a force–compression curve (see the module docstring).
 
     Parameters
@@ -359,6 +394,9 @@ def fit(curve, model="unit-mesh", *, free=("EI",), fixed: dict | None = None, in
     settings : :class:`socbjax.FitSettings` (optimiser, iterations, tolerance, branch, data
         binning and cropping, path following of the model).
     progress : a progress line over optimiser iterations on stderr.
+    compare : models (names or FitModels), e.g. ``("column", "unit-mesh")``: also fit those
+        (:func:`socbjax.compare_models`; default free parameters, this fit's dimension) and
+        store the table, with this fit as a row, in ``result.comparison``.
 
     Returns a :class:`FitResult`.  Raises ``ValueError`` for unknown or doubly-specified
     parameters, values outside bounds, non-identifiable combinations, curves that never reach
@@ -402,27 +440,14 @@ def fit(curve, model="unit-mesh", *, free=("EI",), fixed: dict | None = None, in
         bar(iteration, loss, _float_values({n: v for n, v in problem.to_values(z).items() if n in problem.free}))
 
     z, history, converged, message, evaluations = _optimise(problem, settings, jac, report, bar)
-    return _result(problem, settings, jac, z, history, converged, message, evaluations, bar, t0, loss0)
+    result = _result(problem, settings, jac, z, history, converged, message, evaluations, bar, t0, loss0,
+                     sigma_given=sigma is not None)
+    if compare is None:
+        return result
+    from ._compare import attach_comparison
 
-
-def _systematic(residuals: np.ndarray) -> str | None:
-    """A warning when the residuals' signs come in far fewer runs than independent noise gives
-    (Wald–Wolfowitz runs test, z < −3: a false alarm in 1/700 fits of a right model): the
-    model misses the curve's shape, whatever R² says."""
-    signs = np.sign(residuals[residuals != 0])
-    n_pos, n_neg = int(np.sum(signs > 0)), int(np.sum(signs < 0))
-    n = n_pos + n_neg
-    if n_pos < 2 or n_neg < 2:
-        return None
-    runs = 1 + int(np.sum(signs[1:] != signs[:-1]))
-    mean = 2.0 * n_pos * n_neg / n + 1.0
-    var = 2.0 * n_pos * n_neg * (2.0 * n_pos * n_neg - n) / (n**2 * (n - 1))
-    z = (runs - mean) / math.sqrt(var) if var > 0 else 0.0
-    if z >= -3.0:
-        return None
-    return (f"the residuals are systematic: their signs change {plural(runs - 1, 'time')} along the curve where noise "
-            f"would give about {mean - 1:.0f} (runs test z = {z:.1f}): the model does not follow the curve's shape "
-            "(see the figure); the values are that model's best compromise, not properties of the sample")
+    return attach_comparison(result, curve, compare, model, free=problem.free, model_options=model_options,
+                             settings=settings, sigma=sigma, progress=progress, dim=problem.model.base.dim)
 
 
 def _stationary(J: np.ndarray, r: np.ndarray) -> bool:
@@ -446,7 +471,18 @@ def _status(converged: bool, message: str, moved: bool, stationary: bool, r_squa
     return RESULTS.successful, message
 
 
-def _result(problem, settings, jac, z, history, converged, message, evaluations, bar, t0, loss0) -> FitResult:
+def _hysteresis(problem, r) -> dict:
+    """Data and model hysteresis (pN·µm) when both branches were fitted, else {}."""
+    back = problem.retract
+    if back is None or back.all() or not back.any():
+        return {}
+    c, F, model = problem.compression, problem.force, problem.force + r
+    return {"hysteresis_data": hysteresis_energy(c[~back], F[~back], c[back], F[back]),
+            "hysteresis_model": hysteresis_energy(c[~back], model[~back], c[back], model[back])}
+
+
+def _result(problem, settings, jac, z, history, converged, message, evaluations, bar, t0, loss0,
+            sigma_given: bool = False) -> FitResult:
     J, r = (np.asarray(a) for a in jac(jnp.asarray(z)))
     values = _float_values(problem.to_values(jnp.asarray(z)))
     if not (np.all(np.isfinite(r)) and np.all(np.isfinite(J))):
@@ -462,11 +498,15 @@ def _result(problem, settings, jac, z, history, converged, message, evaluations,
     r_squared = 1.0 - float(r @ r) / spread if spread > 0 else -math.inf
     moved = 0.5 * float(weighted @ weighted) < loss0 * (1.0 - 1e-12)
     result, message = _status(converged, message, moved, _stationary(J, weighted), r_squared)
-    systematic = _systematic(weighted)
-    if systematic and result == RESULTS.successful:
-        warnings = [systematic] + warnings
+    goodness = judge_fit(problem, values, r, sigma_given)
+    realisation = (problem.model.realisation_errors(problem, values, J, np.asarray(z))
+                   if hasattr(problem.model, "realisation_errors") and np.all(np.isfinite(se)) else None)
+    if goodness.misfit:
+        warnings = [goodness.warning()] + warnings
     if result != RESULTS.successful:
         warnings = [f"{message}: {RESULTS[result]}"] + warnings
+    if goodness.notes:
+        warnings = warnings + ["; ".join(goodness.notes)]
     return FitResult(
         model=problem.model.name, names=free, values=values, standard_errors=dict(zip(free, map(float, se))),
         correlation=corr, covariance=cov, loss=0.5 * float(weighted @ weighted), rms=float(np.sqrt(np.mean(r**2))),
@@ -474,5 +514,7 @@ def _result(problem, settings, jac, z, history, converged, message, evaluations,
         history=history, r_squared=r_squared,
         compression=problem.compression, force=problem.force, model_force=problem.force + r,
         units={n: table[n].unit for n in values}, optimizer=settings.optimizer, n_evaluations=int(evaluations) + 1,
-        elapsed_s=time.perf_counter() - t0, result=result,
+        elapsed_s=time.perf_counter() - t0, result=result, noise=goodness.noise, noise_source=goodness.noise_source,
+        chi2_reduced=goodness.chi2_reduced, misfit=goodness.misfit, aic=goodness.aic, bic=goodness.bic,
+        n_parameters=len(free), goodness={**goodness.to_dict(), **_hysteresis(problem, r)}, realisation_errors=realisation,
     )

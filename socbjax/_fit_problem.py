@@ -24,15 +24,16 @@ import numpy as np
 
 from ._afm import ForceCurve
 from ._compress import compress
-from ._models import FitModel, make_fit_model
+from ._fit_model import FitModel, contact_shift, data_terms
+from ._models import make_fit_model
 from ._parameters import NUISANCE_PARAMETERS, Parameter
 from ._path import PathSettings
 from ._solution import RESULTS, ConvergenceError
 
 __all__ = ["FitProblem", "fit_problem", "BRANCHES", "FitRangeError", "PYTHON_FIXES", "stiffness_sources", "check_start",
-           "diagnose", "scaled_start"]
+           "diagnose", "scaled_start", "parameter_table", "check_identifiable"]
 
-BRANCHES = ("loading", "unloading")
+BRANCHES = ("loading", "unloading", "both")
 
 # How each front end spells the fixes a FitRangeError suggests ({value}, {name} filled in).
 PYTHON_FIXES = {
@@ -105,6 +106,8 @@ class FitProblem:
     model : the :class:`socbjax.FitModel`; reach : the largest probe travel needed (µm).
     path : z -> the adaptive :func:`socbjax.compress` path (untraced, ``throw=False``) over
         the data's range at those values: what to inspect when ``residuals`` fails.
+    retract : [m] bool, the points on the retract (unloading) branch; None when only the
+        approach is fitted (``branch="both"``: approach points first, then retract points).
     """
 
     residuals: Callable
@@ -119,9 +122,26 @@ class FitProblem:
     model: FitModel
     reach: float
     path: Callable | None = None
+    retract: np.ndarray | None = None
 
 
 def _data(curve, branch: str, max_points: int, min_compression):
+    """(compression [m], force [m], retract [m] bool or None) of the fitted branch(es)."""
+    if branch != "both":
+        c, F = _branch_data(curve, branch, max_points, min_compression)
+        return c, F, (np.ones(c.size, bool) if branch == "unloading" else None)
+    if not isinstance(curve, ForceCurve):
+        raise ValueError("branch='both' needs a socbjax.ForceCurve with approach and retract (socbjax.load_curve); "
+                         "for (compression, force) arrays fit one branch")
+    if len(curve.approach) == 0 or len(curve.retract) == 0:
+        raise ValueError("branch='both': the curve has no retract segment (an approach only); fit branch='loading'")
+    c1, F1 = _branch_data(curve, "loading", max_points, min_compression)
+    c2, F2 = _branch_data(curve, "unloading", max_points, min_compression)
+    return (np.concatenate([c1, c2]), np.concatenate([F1, F2]),
+            np.concatenate([np.zeros(c1.size, bool), np.ones(c2.size, bool)]))
+
+
+def _branch_data(curve, branch: str, max_points: int, min_compression):
     if isinstance(curve, ForceCurve):
         segment = 0 if branch == "loading" else 1
         part = curve if np.all(curve.segment == segment) else (curve.approach if segment == 0 else curve.retract)
@@ -157,7 +177,7 @@ def _data(curve, branch: str, max_points: int, min_compression):
     return c, F
 
 
-def _parameter_table(model: FitModel, free, fixed, initial, bounds) -> tuple[dict[str, Parameter], tuple, dict, dict]:
+def parameter_table(model: FitModel, free, fixed, initial, bounds) -> tuple[dict[str, Parameter], tuple, dict, dict]:
     table = {**model.parameters, **NUISANCE_PARAMETERS}
     free = tuple(free.split(",")) if isinstance(free, str) else tuple(free)
     fixed, initial, bounds = dict(fixed or {}), dict(initial or {}), dict(bounds or {})
@@ -179,6 +199,32 @@ def _parameter_table(model: FitModel, free, fixed, initial, bounds) -> tuple[dic
     return table, free, fixed, start
 
 
+def _contact_start(c, F, retract, parameter: Parameter) -> float:
+    """A start for a free ``contact_point`` (µm): the first approach compression where the force
+    leaves the baseline (median of the points before c = 0) by more than 5 × its noise (MAD of
+    first differences / 0.954) and 5 % of the force range; 0 when the curve has fewer than 5
+    points before contact or never leaves it.  A gradient cannot find the contact of a network
+    whose force rises within 10⁻⁴ µm of contact (the residuals are flat in it between data
+    points), so the start must be close."""
+    approach = np.ones(c.size, bool) if retract is None else ~retract
+    c, F = c[approach], F[approach]
+    before = c < 0
+    if before.sum() < 5:
+        return 0.0
+    base = float(np.median(F[before]))
+    noise = float(np.median(np.abs(np.diff(F[before])))) / 0.954
+    threshold = max(5 * noise, 0.05 * float(np.ptp(F)))
+    leaves = np.flatnonzero(F - base > threshold)
+    if leaves.size == 0:
+        return 0.0
+    k = int(leaves[0])
+    guess = 0.5 * (c[k] + c[k - 1]) if k > 0 else float(c[k])
+    lo, hi = parameter.lower, parameter.upper
+    span = (hi - lo) if lo is not None and hi is not None else 1.0
+    return float(np.clip(guess, (lo if lo is not None else -np.inf) + 1e-3 * span,
+                         (hi if hi is not None else np.inf) - 1e-3 * span))
+
+
 def stiffness_sources(model: FitModel, free, fixed) -> set:
     """The parameters the segments' EI values come from (a group's when it is free or fixed,
     else the global ``EI``)."""
@@ -189,17 +235,22 @@ def stiffness_sources(model: FitModel, free, fixed) -> set:
     return set(source)
 
 
-def _check_identifiable(model: FitModel, free, fixed) -> None:
-    if "force_scale" not in free:
+def check_identifiable(model: FitModel, free, fixed) -> None:
+    if "contact_point" in (*free, *fixed) and "contact_offset" in (*free, *fixed):
+        raise ValueError("contact_point and contact_offset are the same shift (contact_offset = −contact_point); "
+                         "use one of them")
+    scales = [n for n in ("force_scale", *getattr(model, "force_scales", ())) if n in free]
+    if not scales:
         return
     source = stiffness_sources(model, free, fixed)
     ei_free = sorted(source & set(free))
-    if all(name in free for name in source):
+    if len(scales) > 1 or all(name in free for name in source):
+        names = ", ".join(scales + ei_free)
         raise ValueError(
-            f"force_scale and {', '.join(ei_free)} are not separately identifiable from one curve: at fixed geometry "
-            "the force scales with EI (exactly with the default perturbation, which scales with EI), "
-            "F ∝ EI × force_scale, so only their product is determined. "
-            "Fix one of them, e.g. fixed={'force_scale': 1.0} (one outcrop under the probe) or fix EI"
+            f"{names} are not separately identifiable from one curve: at fixed geometry the force scales with EI "
+            "(exactly with the default perturbation, which scales with EI) and with each of "
+            f"{', '.join(scales)}, so only their product is determined. Fix all but one of them, e.g. "
+            f"fixed={{'{scales[0]}': ...}} (a value measured independently) or fix EI"
         )
 
 
@@ -231,16 +282,22 @@ def fit_problem(curve, model="unit-mesh", *, free=("EI",), fixed=None, initial=N
         raise ValueError(f"max_points must be an integer of at least 3, got {max_points!r}")
     model = make_fit_model(model, **(model_options or {}))
     free = tuple(n.strip() for n in free.split(",")) if isinstance(free, str) else tuple(free)
-    c, F = _data(curve, branch, int(max_points), min_compression)
+    c, F, retract = _data(curve, branch, int(max_points), min_compression)
     bounds = dict(bounds or {})
+    # a free contact shift moves the contact point within the data's own range: beyond it the
+    # model would be sampled past the data (or entirely before contact) and the fit is degenerate
     if "contact_offset" in free and "contact_offset" not in bounds:
-        # the offset moves the contact point within the data's own range: beyond it the model
-        # would be sampled past the data (or entirely before contact) and the fit is degenerate
         bounds["contact_offset"] = (-0.5 * float(c.max()), 0.1 * float(c.max()))
-    table, free, fixed, start = _parameter_table(model, free, fixed, initial, bounds)
-    _check_identifiable(model, free, fixed)
-    offset_room = max(0.0, table["contact_offset"].upper or 0.0) if "contact_offset" in free else 0.0
-    reach = float(c.max()) + max(fixed.get("contact_offset", start.get("contact_offset", 0.0)), 0.0) + offset_room
+    if "contact_point" in free and "contact_point" not in bounds:
+        bounds["contact_point"] = (-0.1 * float(c.max()), 0.5 * float(c.max()))
+    table, free, fixed, start = parameter_table(model, free, fixed, initial, bounds)
+    if "contact_point" in free and "contact_point" not in (initial or {}):
+        start["contact_point"] = _contact_start(c, F, retract, table["contact_point"])
+    check_identifiable(model, free, fixed)
+    shift = contact_shift({**start, **fixed})
+    room = max(0.0, table["contact_offset"].upper or 0.0) if "contact_offset" in free else 0.0
+    room += max(0.0, -(table["contact_point"].lower or 0.0)) if "contact_point" in free else 0.0
+    reach = float(c.max()) + max(float(shift), 0.0) + room
     if reach >= model.gap:
         size = model.size_for(reach)
         raise FitRangeError("gap", model=model.name, reach=reach, compression=float(c.max()), limit=model.gap,
@@ -254,21 +311,16 @@ def fit_problem(curve, model="unit-mesh", *, free=("EI",), fixed=None, initial=N
 
     sigma = _sigma(sigma, c.size, curve)
     c_j, F_j, sigma_j = jnp.asarray(c), jnp.asarray(F), jnp.asarray(sigma)
-    unload = branch == "unloading"
-    floor = 1e-6 * reach
+    unload = retract is not None
 
     def residuals(z, throw: bool = False):
         values = to_values(z)
-        network = model.network({n: values[n] for n in physical})
-        u = c_j + values.get("contact_offset", 0.0)
-        result = compress(network, reach, at=jnp.clip(u, floor, reach), unload=unload, method=method,
-                          settings=path, perturbation=values.get("perturbation"), throw=throw)
-        force = result.force[c.size:][::-1] if unload else result.force
-        predicted = values.get("force_scale", 1.0) * jnp.where(u > 0, force, 0.0) + values.get("baseline", 0.0)
+        u = c_j + contact_shift(values)
+        force, ok = model.probe_force(values, u, reach=reach, retract=retract, method=method, settings=path,
+                                      throw=throw)
         # a path that fails at these values, or whose nodes cross the surface (not physical: no
         # contact model), gives NaN residuals: the optimiser rejects the step
-        ok = jnp.all(result.converged) & (result.result != RESULTS.surface_crossed)
-        return jnp.where(ok, (predicted - F_j) / sigma_j, jnp.nan)
+        return jnp.where(ok, (data_terms(values, force, c_j) - F_j) / sigma_j, jnp.nan)
 
     def full_path(z):
         values = to_values(z)
@@ -278,7 +330,7 @@ def fit_problem(curve, model="unit-mesh", *, free=("EI",), fixed=None, initial=N
 
     z0 = jnp.asarray([table[n].to_z(start[n]) for n in free])
     return FitProblem(residuals=residuals, to_values=to_values, z0=z0, free=free, fixed=fixed, compression=c, force=F,
-                      sigma=sigma, table=table, model=model, reach=reach, path=full_path)
+                      sigma=sigma, table=table, model=model, reach=reach, path=full_path, retract=retract)
 
 
 # ----------------------------------------------------------------- the start of a fit

@@ -35,13 +35,27 @@ import jax.numpy as jnp
 import numpy as np
 
 from ._builders import column
-from ._probe import probe_gap, probe_network
-from ._perturbation import strand_segments
 from ._dendritic import dendritic_outcrop, unit_dendritic_mesh
+from ._fit_model import FitModel, contact_shift, data_terms
+from ._lawn import LawnModel
 from ._network import Network
 from ._parameters import Parameter
+from ._perturbation import strand_segments
+from ._probe import probe_network
 
-__all__ = ["FitModel", "ColumnModel", "UnitMeshModel", "OutcropModel", "make_fit_model", "FIT_MODELS", "branch_orders"]
+__all__ = [
+    "FIT_MODELS",
+    "ColumnModel",
+    "FitModel",
+    "LawnModel",
+    "OutcropModel",
+    "UnitMeshModel",
+    "branch_orders",
+    "builder_options",
+    "contact_shift",
+    "data_terms",
+    "make_fit_model",
+]
 
 _ACTIN_EI = 0.071
 
@@ -53,68 +67,6 @@ def _ei(name: str, doc: str) -> Parameter:
 _PERTURBATION = Parameter("perturbation", 1e-5, "pN", lower=0.0, doc="lateral force on the middle of every strand")
 
 
-class FitModel:
-    """Base class: ``parameters`` (name -> Parameter), ``groups`` (name -> segment mask [S]),
-    ``base`` (the network at the defaults) and :meth:`network` (values -> Network, traced)."""
-
-    name = "model"
-    base: Network
-    parameters: dict[str, Parameter]
-    groups: dict[str, np.ndarray]
-
-    # The builder option that scales the model (all lengths with it) and the fraction of it the
-    # path can typically follow before a node crosses the surface (there is no contact model):
-    # used to suggest a model large enough for a curve.  None: no such option.
-    size_option: str | None = None
-    reach_fraction: float = 1.0
-
-    @property
-    def gap(self) -> float:
-        """Largest probe travel the model can reach (µm): the probe–surface distance."""
-        return probe_gap(self.base)
-
-    def size_for(self, reach: float) -> float | None:
-        """A value of :attr:`size_option` (µm, rounded up) whose model can typically be
-        compressed by ``reach`` µm before its nodes cross the surface; None if the model has
-        no size option."""
-        if self.size_option is None:
-            return None
-        need = float(reach) / self.reach_fraction
-        step = 10.0 ** np.floor(np.log10(need)) / 5  # round up to 2 significant digits, even: 1.2, 1.4, .., 12, 14
-        return float(np.ceil(need / step) * step)
-
-    def describe(self) -> str:
-        lines = [f"{self.name}: {self.base.n_nodes} nodes, {self.base.n_segments} segments, {self.base.n_junctions} junctions"]
-        for p in self.parameters.values():
-            lines.append(f"  {p.name:<14s} default {p.value:<10.4g} {p.unit:<8s} bounds ({p.lower}, {p.upper})  {p.doc}")
-        return "\n".join(lines)
-
-    def stiffness(self, values: dict) -> jnp.ndarray:
-        """EI per segment [S] (pN·µm²) from the global and group values."""
-        EI = jnp.full((self.base.n_segments,), 1.0) * values.get("EI", self.parameters["EI"].value)
-        for name, mask in self.groups.items():
-            if name in values:
-                EI = jnp.where(jnp.asarray(mask), values[name], EI)
-        return EI
-
-    def geometry(self, values: dict) -> tuple:
-        """(positions [N, d], tangents [N, d], lengths [S]); default: the base geometry."""
-        return self.base.positions, self.base.tangents, self.base.lengths
-
-    def network(self, values: dict) -> Network:
-        """The network at ``values`` (name -> float or traced scalar; missing: defaults)."""
-        unknown = set(values) - set(self.parameters)
-        if unknown:
-            raise ValueError(f"{self.name} has no parameter(s) {sorted(unknown)}; it has {sorted(self.parameters)}")
-        positions, tangents, lengths = self.geometry(values)
-        EI = self.stiffness(values)
-        if "perturbation" in values:  # given explicitly: compress(perturbation=...) applies it
-            loads = jnp.zeros_like(self.base.loads)
-        else:  # the builder's loads, scaled with EI so that forces scale exactly with EI
-            loads = self.base.loads * (jnp.mean(EI) / jnp.mean(jnp.asarray(self.base.EI)))
-        return self.base.replace(positions=positions, tangents=tangents, lengths=lengths, EI=EI, loads=loads)
-
-
 class ColumnModel(FitModel):
     """A single filament of ``n_nodes`` (µm ``length``) with ``supports``, compressed by its
     last node toward the first (:func:`socbjax.column`)."""
@@ -122,7 +74,7 @@ class ColumnModel(FitModel):
     name = "column"
     size_option, reach_fraction = "length", 0.35  # clamped–pinned: a node crosses a support plane at u ≈ 0.39 L
 
-    def __init__(self, n_nodes: int = 5, *, length: float = 1.0, supports=("clamped", "pinned"), dim: int = 2):
+    def __init__(self, n_nodes: int = 5, *, length: float = 1.0, supports=("clamped", "pinned"), dim: int = 3):
         self.base = probe_network(column(n_nodes, length=length, EI=_ACTIN_EI, supports=supports, dim=dim))
         self.parameters = {"EI": _ei("EI", "bending stiffness"), "perturbation": _PERTURBATION}
         self.groups = {}
@@ -142,7 +94,7 @@ class UnitMeshModel(FitModel):
     size_option, reach_fraction = "mother_length", 0.3  # crossing at 0.29 L (80°) .. 0.44 L (55°)
 
     def __init__(self, *, branch_angle: float = 70.0, mother_length: float = 1.0, segment_length: float | None = None,
-                 dim: int = 2):
+                 dim: int = 3):
         if segment_length is None:
             segment_length = 0.25 * mother_length
         self.base = unit_dendritic_mesh(
@@ -225,7 +177,7 @@ class OutcropModel(FitModel):
         self.n_strands = len(strand_segments(self.base))
 
 
-FIT_MODELS = {"column": ColumnModel, "unit-mesh": UnitMeshModel, "outcrop": OutcropModel}
+FIT_MODELS = {"column": ColumnModel, "unit-mesh": UnitMeshModel, "outcrop": OutcropModel, "lawn": LawnModel}
 
 
 def make_fit_model(model, **options) -> FitModel:
@@ -236,7 +188,7 @@ def make_fit_model(model, **options) -> FitModel:
         return model
     if model not in FIT_MODELS:
         raise ValueError(f"unknown model {model!r}; use one of {sorted(FIT_MODELS)} or a socbjax.FitModel")
-    known = _builder_options(model)
+    known = builder_options(model)
     unknown = sorted(set(options) - set(known))
     if unknown:
         raise ValueError(f"unknown option(s) {', '.join(map(repr, unknown))} for the {model} model; it takes "
@@ -247,7 +199,7 @@ def make_fit_model(model, **options) -> FitModel:
         raise ValueError(f"invalid option for the {model} model: {err}") from None
 
 
-def _builder_options(model: str) -> list[str]:
+def builder_options(model: str) -> list[str]:
     """The keyword options a built-in model takes (the outcrop: those of dendritic_outcrop but EI)."""
     import inspect
 

@@ -104,8 +104,12 @@ class Parameter:
 NUISANCE_PARAMETERS = {
     p.name: p
     for p in (
-        Parameter("contact_offset", 0.0, "µm", doc="added to the data's compression: shifts the contact point"),
+        Parameter("contact_point", 0.0, "µm",
+                  doc="where on the data's compression axis the model's contact begins: the model sees c − contact_point"),
+        Parameter("contact_offset", 0.0, "µm",
+                  doc="added to the data's compression (= −contact_point; use one of the two)"),
         Parameter("baseline", 0.0, "pN", doc="force offset added to the model force"),
+        Parameter("baseline_tilt", 0.0, "pN/µm", doc="baseline slope: adds baseline_tilt × compression to the model force"),
         Parameter(
             "force_scale", 1.0, "1", lower=0.0,
             doc="multiplies the model force (e.g. the number of outcrops under the probe)",

@@ -87,8 +87,9 @@ def _add_simulate(sub) -> None:
         "--dim",
         type=int,
         choices=[2, 3],
-        default=None,
-        help="2 (planar) or 3 (spatial); default: 2 for the planar unit-mesh and column, 3 for the outcrop",
+        default=3,
+        help="3 (spatial; the default for every network, as for every builder and fit model) or 2 (planar, opt-in: "
+        "faster to compile and run)",
     )
     sim.add_argument("--nodes", type=int, default=9, help="column: number of nodes (default 9)")
     sim.add_argument("--length", type=float, default=1.0, help="column: length in µm (default 1)")
@@ -185,8 +186,6 @@ def _check_simulate(args) -> None:
         raise ValueError(f"--checkpoint-every must be a positive number of steps, got {args.checkpoint_every}")
     if args.network == "column":
         _supports(args.supports)
-    if args.dim is None:  # the unit mesh (Fig. 6a) and a column are planar problems; the outcrop grows in 3D
-        args.dim = 3 if args.network == "outcrop" else 2
 
 
 def _plural(n: int, noun: str) -> str:
@@ -387,6 +386,10 @@ def _dispatch(args) -> int:
         _check_simulate(args)
     if args.command == "plot":
         _steps(args.steps)
+    if args.command == "fit":
+        from ._cli_fit import check_fit_args
+
+        check_fit_args(args)
     from ._cache import enable_compilation_cache
 
     enable_compilation_cache()  # a second run of the same network does not recompile ($SOCBJAX_CACHE_DIR, "off")

@@ -354,3 +354,15 @@ def test_damaged_instrument_files_are_value_errors(tmp_path, content):
     path.write_bytes(content)
     with pytest.raises(ValueError, match="damaged.jpk-force"):
         load_curve(path)
+
+
+def test_hysteresis_is_the_loop_area():
+    """A triangle loop: approach F = 2c, retract F = c on [0, 1] µm → area ½ (2 − 1) = 0.5 pN·µm;
+    reversed retract order and extra points before contact do not change it."""
+    c = np.linspace(-0.2, 1.0, 61)
+    approach = np.where(c > 0, 2 * c, 0.0)
+    retract = np.where(c > 0, c, 0.0)
+    curve = ForceCurve(np.concatenate([c, c[::-1]]), np.concatenate([approach, retract[::-1]]),
+                          np.concatenate([np.zeros(c.size), np.ones(c.size)]).astype(np.int8))
+    assert abs(curve.hysteresis() - 0.5) < 1e-4
+    assert np.isnan(ForceCurve(c, approach).hysteresis())

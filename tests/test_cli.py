@@ -49,6 +49,8 @@ print(code, sorted(m for m in sys.modules if m.split(".")[0] in ("jax", "jaxlib"
     (["simulate", "unit-mesh", "--dim", "5", "--out", "x.h5"], 2),
     (["simulate", "column", "--supports", "pinned/free", "--out", "x.h5"], 2),
     (["simulate", "column", "--max-step", "-1", "--out", "x.h5"], 2), (["plot", "x.h5", "--steps", "1,x"], 2),
+    (["fit", "x.csv"], 2), (["fit", "x.csv", "y.csv", "--out", "fit.json"], 2), (["fit", "x.csv", "--compare", "column"], 2),
+    (["fit", "x.csv", "--dim", "4", "--out", "fit.json"], 2),
 ])
 def test_help_and_argument_errors_do_not_import_jax(tmp_path, argv, code):
     """--help and argument errors answer before JAX (seconds to import) is loaded."""
@@ -72,6 +74,26 @@ def test_python_dash_m_help_imports_no_jax():
     modules = [line.rsplit("|", 1)[-1].strip() for line in out.stderr.splitlines() if line.startswith("import time:")]
     assert out.returncode == 0 and "socbjax.cli" in modules, out.stderr[-2000:]
     assert not [m for m in modules if m.split(".")[0] in ("jax", "jaxlib")]
+
+
+def test_every_network_and_fit_model_defaults_to_3d():
+    """One default dimension (3) for socbjax simulate, socbjax fit and the builders and fit
+    models behind them; planar problems are opt-in (--dim 2)."""
+    parser = socbjax.cli.build_parser()
+    for network in ("unit-mesh", "outcrop", "column"):
+        args = parser.parse_args(["simulate", network, "--out", "x.h5"])
+        socbjax.cli._check_simulate(args)
+        assert args.dim == 3
+    assert parser.parse_args(["simulate", "column", "--dim", "2", "--out", "x.h5"]).dim == 2
+    args = parser.parse_args(["fit", "x.csv", "--out", "fit.json"])
+    assert args.dim is None and "dim" not in socbjax._cli_fit._model_options(args)  # the models' own default: 3
+    assert socbjax._cli_fit._model_options(parser.parse_args(["fit", "x.csv", "--dim", "2", "--out", "f.json"]))["dim"] == 2
+    import inspect
+
+    for target in (socbjax.ColumnModel.__init__, socbjax.UnitMeshModel.__init__, socbjax.column,
+                   socbjax.unit_dendritic_mesh, socbjax.dendritic_outcrop, socbjax.cantilever):
+        assert inspect.signature(target).parameters["dim"].default == 3, target
+    assert socbjax.OutcropModel(generations=1, gap=2.0).base.dim == 3
 
 
 def test_column_supports_default_and_separator_match_fit():

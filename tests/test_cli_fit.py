@@ -18,9 +18,9 @@ import socbjax.cli
 ROOT = Path(__file__).resolve().parents[1]
 JPK = "force-save-example.jpk-force"
 # The README's fit commands, verbatim ("$(socbjax examples NAME)" prints the shipped file's path).
-README_FIT = ('socbjax fit "$(socbjax examples force-save-example.jpk-force)" --model unit-mesh '
+README_FIT = ('socbjax fit "$(socbjax examples force-save-example.jpk-force)" --model unit-mesh --dim 2 '
               "--model-option mother_length=12 --free EI,branch_angle --out fit.json")
-README_TOO_SMALL = ('socbjax fit "$(socbjax examples force-save-example.jpk-force)" --model unit-mesh '
+README_TOO_SMALL = ('socbjax fit "$(socbjax examples force-save-example.jpk-force)" --model unit-mesh --dim 2 '
                     "--free EI,branch_angle --out fit.json")
 PYTHON_SPELLINGS = ("curve.select", "FitSettings", "model_options", "method='arclength'", "initial=")
 
@@ -93,7 +93,7 @@ def test_shipped_jpk_curve_fits_EI_of_a_12_um_mesh(tmp_path, capsys):
     sits near the Euler load 20.19 EI/L² of the 12-µm clamped–pinned mother."""
     pytest.importorskip("afmformats")
     out = tmp_path / "fit.json"
-    argv = ["fit", str(sj.example_file(JPK)), "--model-option", "mother_length=12", "--out", str(out)]
+    argv = ["fit", str(sj.example_file(JPK)), "--dim", "2", "--model-option", "mother_length=12", "--out", str(out)]
     assert socbjax.cli.main(argv) == 0
     captured = capsys.readouterr()
     report = json.loads(out.read_text())
@@ -150,7 +150,7 @@ def test_a_fold_at_the_start_names_method_arclength_which_then_fits(tmp_path, ca
     """A 40° unit mesh buckles at contact into a branch displacement control cannot follow
     (a fold at u ≈ 0): the error names `--method arclength`, which then fits."""
     pytest.importorskip("afmformats")
-    argv = ["fit", str(sj.example_file("fmt-jpk-fd_spot3-0192.jpk-force")), "--model-option", "branch_angle=40",
+    argv = ["fit", str(sj.example_file("fmt-jpk-fd_spot3-0192.jpk-force")), "--dim", "2", "--model-option", "branch_angle=40",
             "--free", "EI", "--out", str(tmp_path / "fit.json"), "--quiet"]
     assert socbjax.cli.main(argv) == 2
     line = _error_line(capsys)
@@ -169,7 +169,7 @@ def test_shallow_shipped_curves_fit_the_default_mesh(tmp_path, name):
     converges with R² > 0, and the shape misfit is reported."""
     pytest.importorskip("afmformats")
     out = tmp_path / "fit.json"
-    argv = ["fit", str(sj.example_file(name)), "--free", "EI,branch_angle", "--out", str(out), "--quiet"]
+    argv = ["fit", str(sj.example_file(name)), "--dim", "2", "--free", "EI,branch_angle", "--out", str(out), "--quiet"]
     assert socbjax.cli.main(argv) == 0
     report = json.loads(out.read_text())
     assert 1.0 < report["values"]["EI"] < 1e4 and report["r_squared"] > 0.05
@@ -182,13 +182,13 @@ def test_native_csv_fit_with_supports_like_simulate(tmp_path):
     """A pinned–pinned column simulated, written as CSV, fitted with `--supports pinned,pinned`
     (the convention of `socbjax simulate column --supports`): EI recovered exactly, from the
     default start (scaled to the data's force level)."""
-    model = sj.ColumnModel(4, supports=("pinned", "pinned"))
+    model = sj.ColumnModel(4, supports=("pinned", "pinned"), dim=2)
     c = np.linspace(0.02, 0.25, 10)
     F = np.asarray(sj.compress(model.network({"EI": 0.9}), 0.25, at=c).force)
     path = tmp_path / "curve.csv"
     path.write_text("compression_um,force_pN\n" + "\n".join(f"{a},{b}" for a, b in zip(c, F)))
     out = tmp_path / "fit.json"
-    assert socbjax.cli.main(["fit", str(path), "--model", "column", "--model-option", "n_nodes=4", "--supports",
+    assert socbjax.cli.main(["fit", str(path), "--model", "column", "--dim", "2", "--model-option", "n_nodes=4", "--supports",
                              "pinned,pinned", "--free", "EI", "--out", str(out), "--quiet"]) == 0
     report = json.loads(out.read_text())
     assert report["values"]["EI"] == pytest.approx(0.9, rel=1e-5)
@@ -242,3 +242,17 @@ def test_fit_module_imports_no_jax():
     code = "import sys, socbjax._cli_fit; print(sorted(m for m in ('jax', 'numpy', 'socbjax._fit') if m in sys.modules))"
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout
     assert out.strip() == "[]"
+
+
+def test_dimension_options(tmp_path, capsys):
+    """--dim (default 3, as every builder and socbjax simulate) and the older --model-option
+    dim=... agree or the command says to give the dimension once."""
+    path = tmp_path / "curve.csv"
+    path.write_text("compression_um,force_pN\n0.01,1\n0.02,2\n0.03,3\n0.04,4\n")
+    argv = ["fit", str(path), "--model", "column", "--out", str(tmp_path / "f.json")]
+    assert socbjax.cli.main([*argv, "--dim", "2", "--model-option", "dim=3"]) == 2
+    assert "give the dimension once" in _error_line(capsys)
+    args = socbjax.cli.build_parser().parse_args([*argv, "--dim", "2", "--model-option", "dim=2"])
+    assert socbjax._cli_fit._model_options(args)["dim"] == 2
+    assert socbjax.cli.main(["fit", str(path), str(path), "--out", str(tmp_path / "f.json")]) == 2
+    assert "names a JSON file" in _error_line(capsys) and not (tmp_path / "f.json").exists()

@@ -51,7 +51,7 @@ def test_recovers_contact_offset_and_baseline_on_a_column():
     """An imperfect column (lateral force 0.1 pN, 14 % of its Euler load) stiffens smoothly
     from contact, so the contact point is determined by the data.  Pinned–pinned: it bulges
     through its supports' planes only past u ≈ 0.54 µm (the data reach 0.43 µm)."""
-    model = ColumnModel(5, supports=("pinned", "pinned"))
+    model = ColumnModel(5, supports=("pinned", "pinned"), dim=2)
     c = np.linspace(-0.1, 0.4, 30)
     extra = {"contact_offset": 0.03, "baseline": 0.05}
     F = _synthetic(model, {"EI": 0.071, "perturbation": 0.1}, c, seed=4, noise=0.005, displacement=0.45, **extra)
@@ -69,7 +69,7 @@ def test_recovers_contact_offset_and_baseline_on_a_column():
 def test_optax_optimisers_reach_the_least_squares_EI(optimizer):
     """One parameter: the least-squares EI of a noisy curve is known in closed form because the
     force is exactly proportional to EI: EI* = EI₀ Σ F f / Σ f² (f the model at EI₀)."""
-    model = ColumnModel(4, supports=("pinned", "pinned"))
+    model = ColumnModel(4, supports=("pinned", "pinned"), dim=2)
     c = np.linspace(0.02, 0.3, 12)
     F = _synthetic(model, {"EI": 0.071}, c, seed=2)
     f0 = np.asarray(sj.compress(model.network({"EI": 0.071}), 0.3, at=c).force)
@@ -87,7 +87,7 @@ def test_optax_optimisers_reach_the_least_squares_EI(optimizer):
 def test_EI_and_force_scale_are_refused_together():
     c, F = np.linspace(0.01, 0.2, 5), np.ones(5)
     with pytest.raises(ValueError, match="not separately identifiable"):
-        sj.fit((c, F), "column", free=("EI", "force_scale"))
+        sj.fit((c, F), "column", model_options={"dim": 2}, free=("EI", "force_scale"))
     model = UnitMeshModel(dim=2)
     with pytest.raises(ValueError, match="not separately identifiable"):
         sj.fit((c, F), model, free=("EI_mother", "EI_daughter", "force_scale"), fixed={})
@@ -100,7 +100,7 @@ def test_EI_and_force_scale_are_refused_together():
 def test_correlated_parameters_are_reported_not_identifiable():
     """Contact offset and EI on a flat post-buckling plateau: shifting the contact point and
     changing EI are nearly the same change of the curve → flagged, with a warning."""
-    model = ColumnModel(4, supports=("pinned", "pinned"))
+    model = ColumnModel(4, supports=("pinned", "pinned"), dim=2)
     c = np.linspace(0.25, 0.3, 8)  # a short piece of the plateau only
     F = _synthetic(model, {"EI": 0.071}, c, seed=5, noise=0.0, displacement=0.35)
     result = sj.fit((c, F), model, free=("EI", "baseline"), initial={"EI": 0.06}, settings=sj.FitSettings(max_iterations=10))
@@ -109,7 +109,7 @@ def test_correlated_parameters_are_reported_not_identifiable():
 
 @pytest.mark.slow
 def test_fit_result_json_round_trip(tmp_path):
-    model = ColumnModel(3, supports=("pinned", "pinned"))
+    model = ColumnModel(3, supports=("pinned", "pinned"), dim=2)
     c = np.linspace(0.02, 0.2, 6)
     F = _synthetic(model, {"EI": 0.071}, c, seed=0)
     result = sj.fit((c, F), model, free="EI", initial={"EI": 0.06})
@@ -124,23 +124,23 @@ def test_fit_result_json_round_trip(tmp_path):
 def test_bad_input_is_refused_with_clear_messages():
     c, F = np.linspace(0.01, 0.2, 6), np.linspace(1, 2, 6)
     with pytest.raises(ValueError, match="unknown parameter 'stiffness'"):
-        sj.fit((c, F), "column", free=("stiffness",))
+        sj.fit((c, F), "column", model_options={"dim": 2}, free=("stiffness",))
     with pytest.raises(ValueError, match="both free and fixed"):
-        sj.fit((c, F), "column", free=("EI",), fixed={"EI": 0.1})
+        sj.fit((c, F), "column", model_options={"dim": 2}, free=("EI",), fixed={"EI": 0.1})
     with pytest.raises(ValueError, match="NaN"):
-        sj.fit((c, np.where(c > 0.1, np.nan, F)), "column")
+        sj.fit((c, np.where(c > 0.1, np.nan, F)), "column", model_options={"dim": 2})
     with pytest.raises(ValueError, match="at least 3"):
-        sj.fit((c[:2], F[:2]), "column")
+        sj.fit((c[:2], F[:2]), "column", model_options={"dim": 2})
     with pytest.raises(ValueError, match="non-decreasing"):
-        sj.fit((c[::-1], F), "column")
+        sj.fit((c[::-1], F), "column", model_options={"dim": 2})
     with pytest.raises(ValueError, match="never passes the contact"):
-        sj.fit((-c[::-1], F), "column")
+        sj.fit((-c[::-1], F), "column", model_options={"dim": 2})
     with pytest.raises(ValueError, match="crop the curve"):
-        sj.fit((c * 10, F), "column")
+        sj.fit((c * 10, F), "column", model_options={"dim": 2})
     with pytest.raises(ValueError, match="outside its bounds"):
-        sj.fit((c, F), "unit-mesh", free=("branch_angle",), initial={"branch_angle": 95.0})
+        sj.fit((c, F), "unit-mesh", model_options={"dim": 2}, free=("branch_angle",), initial={"branch_angle": 95.0})
     with pytest.raises(ValueError, match="optimizer"):
-        sj.fit((c, F), "column", settings=sj.FitSettings(optimizer="newton"))
+        sj.fit((c, F), "column", model_options={"dim": 2}, settings=sj.FitSettings(optimizer="newton"))
     with pytest.raises(ValueError, match="unknown model"):
         sj.fit((c, F), "spring")
     with pytest.raises(ValueError, match="no parameter"):
@@ -150,7 +150,7 @@ def test_bad_input_is_refused_with_clear_messages():
 @pytest.mark.slow
 def test_unloading_branch_fit():
     """The retract/unloading branch: a reversible column curve gives the same EI."""
-    model = ColumnModel(4, supports=("pinned", "pinned"))
+    model = ColumnModel(4, supports=("pinned", "pinned"), dim=2)
     c = np.linspace(0.02, 0.2, 6)
     F = _synthetic(model, {"EI": 0.08}, c, seed=1, noise=0.0)
     result = sj.fit((c, F), model, free="EI", initial={"EI": 0.05}, settings=sj.FitSettings(branch="unloading"))
@@ -163,7 +163,7 @@ def test_a_fit_that_explains_nothing_is_not_converged():
     """Data in the wrong units (forces 1e12× the model's, as if N were read as pN): the
     optimiser cannot reduce the loss; the fit must say so (not converged, R² ≤ 0, a
     RESULTS item other than successful), never report success with unmoved parameters."""
-    model = ColumnModel(3, supports=("pinned", "pinned"))
+    model = ColumnModel(3, supports=("pinned", "pinned"), dim=2)
     c = np.linspace(0.02, 0.2, 6)
     F = _synthetic(model, {"EI": 0.071}, c, seed=0, noise=0.0) * 1e12
     result = sj.fit((c, F), model, free="EI", initial={"EI": 0.06}, settings=sj.FitSettings(max_iterations=5))
@@ -177,13 +177,13 @@ def test_a_curve_beyond_the_model_names_cause_and_python_fixes():
     gap, a model size that reaches and a crop, in this API's spelling."""
     c, F = np.linspace(0.01, 2.0, 8), np.linspace(1.0, 2.0, 8)
     with pytest.raises(ValueError) as err:
-        sj.fit((c, F), "unit-mesh")
+        sj.fit((c, F), "unit-mesh", model_options={"dim": 2})
     text = str(err.value)
     assert err.value.cause == "gap" and "probe–surface gap" in text
     assert "model_options={'mother_length': 6.8}" in text and "curve.select(max_compression=0.27)" in text
     assert "--" not in text  # no command-line option
     with pytest.raises(ValueError, match=r"model_options=\{'length': 5.8\}"):
-        sj.fit((c, F), "column")
+        sj.fit((c, F), "column", model_options={"dim": 2})
 
 
 @pytest.mark.slow
@@ -193,7 +193,7 @@ def test_surface_crossing_inside_the_data_is_diagnosed():
     "use method='arclength'", which would cross the surface too)."""
     c = np.linspace(0.01, 0.6, 12)
     with pytest.raises(ValueError) as err:
-        sj.fit((c, np.ones(12)), "unit-mesh")
+        sj.fit((c, np.ones(12)), "unit-mesh", model_options={"dim": 2})
     assert err.value.cause == "surface" and 0.4 < err.value.limit < 0.46
     assert "cross the surface" in str(err.value) and "arclength" not in str(err.value)
     assert "model_options={'mother_length': 2}" in str(err.value)

@@ -30,4 +30,4 @@ def test_errors():
         p.check(90.0)
     with pytest.raises(ValueError, match="finite"):
         p.check(np.nan)
-    assert set(sj.NUISANCE_PARAMETERS) == {"contact_offset", "baseline", "force_scale"}
+    assert set(sj.NUISANCE_PARAMETERS) == {"contact_point", "contact_offset", "baseline", "baseline_tilt", "force_scale"}

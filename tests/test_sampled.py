@@ -31,7 +31,7 @@ def test_sampled_column_follows_the_closed_form_and_its_slope():
     """Forces at the samples equal the elliptic-integral elastica; dF/du (implicit, with
     respect to the sampled displacement) equals the closed form's slope; dF/dEI = F/EI (the
     default perturbation scales with EI, so the force scales exactly with EI)."""
-    model = ColumnModel(5, supports=("pinned", "pinned"))
+    model = ColumnModel(5, supports=("pinned", "pinned"), dim=2)
     at = jnp.array([0.05, 0.15, 0.3])
 
     def force(EI, a):
@@ -49,7 +49,7 @@ def test_sampled_column_follows_the_closed_form_and_its_slope():
 
 @pytest.mark.slow
 def test_grad_jacfwd_vmap_and_jit_agree():
-    model = ColumnModel(4, supports=("clamped", "free"))
+    model = ColumnModel(4, supports=("clamped", "free"), dim=2)
     at = jnp.array([0.1, 0.2])
 
     def loss(EI):
@@ -107,7 +107,7 @@ def test_implicit_gradients_match_finite_differences(case):
 
 def test_column_gradient_matches_finite_differences_past_buckling():
     """Single filament: EI, perturbation and the sampled displacement, 1e-6 relative."""
-    model = ColumnModel(5, supports=("clamped", "pinned"))
+    model = ColumnModel(5, supports=("clamped", "pinned"), dim=2)
     weights = jnp.array([0.3, 1.0, 2.0])
 
     def loss(theta):
@@ -150,7 +150,7 @@ def test_sampled_input_errors():
 
 def test_traced_displacement_is_allowed():
     """The path range may be traced too (one compiled program for any travel)."""
-    model = ColumnModel(4, supports=("pinned", "pinned"))
+    model = ColumnModel(4, supports=("pinned", "pinned"), dim=2)
     f = jax.jit(lambda u: sj.compress(model.network({}), u, at=jnp.array([0.1])).force[0])
     assert float(f(0.2)) == pytest.approx(float(f(0.3)), rel=1e-9)  # the sample does not depend on the range
 

@@ -110,7 +110,7 @@ def test_sampled_ensemble_under_jit_grad_jacfwd_vmap():
 # ---------------------------------------------------------------------------- fit losses
 @pytest.mark.slow  # every fit in the default suite differentiates these residuals under jit (jacfwd)
 def test_fit_loss_under_jit_grad_jacfwd_vmap():
-    model = sj.ColumnModel(4, supports=("pinned", "pinned"))
+    model = sj.ColumnModel(4, supports=("pinned", "pinned"), dim=2)
     c = np.linspace(0.02, 0.2, 6)
     truth = np.asarray(sj.compress(model.network({"EI": 0.071}), 0.2, at=c).force)
     problem = sj.fit_problem((c, 1.1 * truth), model, free=("EI", "baseline"))

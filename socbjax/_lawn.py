@@ -1,0 +1,293 @@
+"""A lawn of dendritic outcrops under an AFM probe: :class:`LawnModel` (fit model ``"lawn"``).
+
+An AFM probe compresses a film of outcrops (:func:`socbjax.dendritic_outcrop`) nucleated on
+the substrate at areal density ρ (µm⁻²).  The model keeps ``n_outcrops`` random
+realisations (seeds ``seed``, ``seed + 1``, …), all grown to the film height, and treats the
+outcrops as mechanically independent (no contact between them yet), so the force is the
+number of outcrops under the probe times their mean force F̄(u) (pN) at probe travel u:
+
+* **flat disc** of area A (µm²): every outcrop under it is compressed by u,
+  ``F(u) = ρ A F̄(u)``;
+* **sphere** of radius R (µm): an outcrop at distance r from the axis is compressed by
+  u − r²/(2R) (the parabolic gap of the sphere, r ≪ R), so with 2πr dr = 2πR dw,
+  ``F(δ) = 2π R ρ ∫₀^δ F̄(w) dw``; the contact area grows as π a² = 2π R δ.
+
+F̄ is the average over the realisations, evaluated as one vmapped
+:func:`socbjax.compress` (``at=`` the probe travels, exact equilibria with implicit
+derivatives) per group of realisations that share a topology (one compiled program per
+group; see ``docs/lawn.md`` for why realisations of different topology are not yet padded to
+one).  The same seeds are used at every evaluation — common random numbers across the
+iterations of a fit — and :meth:`LawnModel.realisation_spread` gives the spread of the
+realisations, the share of the uncertainty that comes from the finite sample.
+
+Identifiability: at fixed geometry the force scales exactly with EI and with ρ, so one curve
+determines only ρ · EI; a fit refuses both free (fix one at an independently measured value).
+The branch angle changes the random growth discretely (which strands reach the surface), so
+it is a topology option here, not a fitted parameter.
+
+Units: µm, pN, pN·µm²; stress in Pa (pN/µm² = Pa); strain = compression / film height.
+"""
+
+from __future__ import annotations
+
+import math
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from ._checks import check_int, check_real
+from ._compress import compress
+from ._dendritic import dendritic_outcrop
+from ._fit_model import FitModel
+from ._parameters import NUISANCE_PARAMETERS, Parameter
+from ._solution import RESULTS
+
+__all__ = ["LawnModel"]
+
+_ACTIN_EI = 0.071
+_BUILT_PERTURBATION = 1e-4  # pN, the outcrop builder's default lateral force per strand
+_GRID = 48  # probe travels at which F̄ is solved for the sphere's integral
+
+
+class LawnModel(FitModel):
+    """A probe pressing a film of random dendritic outcrops (see the module docstring).
+
+    Parameters
+    ----------
+    probe_radius : sphere radius R (µm), or None for a flat disc.
+    probe_area : flat disc area A (µm², default 20); not with ``probe_radius``.
+    film_height : film thickness (µm): the outcrops' probe–substrate gap.
+    generations, growth, segment_length, branch_angle, dim : of each outcrop
+        (:func:`socbjax.dendritic_outcrop`; branch angle in degrees fixes the topology).
+    n_outcrops : realisations averaged (seeds ``seed`` … ``seed + n_outcrops − 1``).
+
+    Fit parameters: ``EI`` (pN·µm²), ``density`` (µm⁻²), ``perturbation`` (pN), and
+    ``branch_angle`` (deg, fixed only: it is the topology's angle), plus the curve's own
+    ``contact_point`` (µm), ``baseline`` (pN), ``baseline_tilt`` (pN/µm).
+    """
+
+    name = "lawn"
+    force_scales = ("density",)
+
+    def __init__(self, probe_radius: float | None = None, probe_area: float | None = None, *,
+                 film_height: float = 3.0, generations: int = 4, n_outcrops: int = 8, seed: int = 0,
+                 branch_angle: float = 70.0, growth: float = 1.0, segment_length: float = 0.5, dim: int = 3):
+        if probe_radius is not None and probe_area is not None:
+            raise ValueError("give probe_radius (sphere, µm) or probe_area (flat disc, µm²), not both")
+        self.probe_radius = None if probe_radius is None else check_real("probe_radius", probe_radius, "µm", low=0.0, traced_ok=False)
+        self.probe_area = None if probe_radius is not None else check_real(
+            "probe_area", 20.0 if probe_area is None else probe_area, "µm²", low=0.0, traced_ok=False)
+        self.film_height = check_real("film_height", film_height, "µm", low=0.0, traced_ok=False)
+        self.n_outcrops = check_int("n_outcrops", n_outcrops, minimum=1, maximum=4096)
+        self.seed = check_int("seed", seed, minimum=0)
+        self.branch_angle = float(branch_angle)
+        self.members = [dendritic_outcrop(generations=generations, gap=self.film_height, growth=growth,
+                                          segment_length=segment_length, branch_angle=branch_angle, EI=_ACTIN_EI,
+                                          seed=self.seed + k, dim=dim) for k in range(self.n_outcrops)]
+        self.base = self.members[0]
+        self.groups = {}
+        by_topology: dict = {}
+        for k, net in enumerate(self.members):
+            by_topology.setdefault(net.topology, []).append(k)
+        self.topology_groups = [tuple(v) for v in by_topology.values()]
+        self._stacked = [jax.tree_util.tree_map(lambda *xs: jnp.stack([jnp.asarray(x) for x in xs]),
+                                                *[self.members[k] for k in g]) for g in self.topology_groups]
+        self.parameters = {
+            "EI": Parameter("EI", _ACTIN_EI, "pN·µm²", lower=0.0, doc="bending stiffness of all filaments"),
+            "density": Parameter("density", 1.0, "µm⁻²", lower=0.0, doc="areal density of outcrops on the substrate"),
+            "branch_angle": Parameter("branch_angle", self.branch_angle, "deg", lower=0.0, upper=90.0,
+                                      doc="daughter–mother angle (topology: fixed only)"),
+            "perturbation": Parameter("perturbation", 1e-5, "pN", lower=0.0,
+                                      doc="lateral force on the middle of every strand"),
+        }
+
+    # ------------------------------------------------------------------ description
+    @property
+    def gap(self) -> float:
+        return self.film_height
+
+    @property
+    def probe(self) -> str:
+        if self.probe_radius is None:
+            return f"flat disc of area {self.probe_area:g} µm²"
+        return f"sphere of radius {self.probe_radius:g} µm"
+
+    def describe(self) -> str:
+        sizes = [m.n_segments for m in self.members]
+        n_topo = len(self.topology_groups)
+        lines = [(f"lawn: {self.probe}, film {self.film_height:g} µm, {self.n_outcrops} outcrop realisation(s) "
+                  f"({min(sizes)}–{max(sizes)} segments, {n_topo} topolog{'y' if n_topo == 1 else 'ies'})")]
+        for p in self.parameters.values():
+            lines.append(f"  {p.name:<14s} default {p.value:<10.4g} {p.unit:<8s} bounds ({p.lower}, {p.upper})  {p.doc}")
+        return "\n".join(lines)
+
+    def area(self, compression):
+        """Probe–film contact area (µm²) at probe travel ``compression`` (µm): A for the disc,
+        2π R δ for the sphere."""
+        if self.probe_radius is None:
+            return self.probe_area * jnp.ones_like(jnp.asarray(compression, jnp.float64))
+        return 2 * math.pi * self.probe_radius * jnp.maximum(jnp.asarray(compression, jnp.float64), 0.0)
+
+    def stress(self, force, compression):
+        """Mean stress under the probe (Pa = pN/µm²): force / contact area (NaN at zero area)."""
+        a = self.area(compression)
+        return jnp.where(a > 0, jnp.asarray(force) / jnp.where(a > 0, a, 1.0), jnp.nan)
+
+    def strain(self, compression):
+        """Engineering strain of the film: compression / film height."""
+        return jnp.asarray(compression, jnp.float64) / self.film_height
+
+    # ------------------------------------------------------------------ the physics
+    def _member_values(self, values: dict, stacked):
+        EI = values.get("EI", self.parameters["EI"].value)
+        EI_arr = jnp.ones_like(stacked.EI) * EI
+        if "perturbation" in values:
+            loads = stacked.loads * (values["perturbation"] / _BUILT_PERTURBATION)
+        else:  # the builder's loads, scaled with EI so that forces scale exactly with EI
+            loads = stacked.loads * (EI / _ACTIN_EI)
+        return stacked.replace(EI=EI_arr, loads=loads)
+
+    def network(self, values: dict):
+        """The first realisation at ``values`` (what a diagnosis of a failed path inspects)."""
+        self._check_values(values)
+        one = self._member_values({k: v for k, v in values.items() if k in ("EI", "perturbation")},
+                                  self._stacked[0])
+        return jax.tree_util.tree_map(lambda x: x[0], one)
+
+    def _check_values(self, values: dict) -> None:
+        unknown = set(values) - set(self.parameters)
+        if unknown:
+            raise ValueError(f"lawn has no parameter(s) {sorted(unknown)}; it has {sorted(self.parameters)}")
+        angle = values.get("branch_angle", self.branch_angle)
+        if not isinstance(angle, jax.core.Tracer) and abs(float(angle) - self.branch_angle) < 1e-12:
+            return
+        raise ValueError(f"the lawn's branch_angle is its outcrops' topology ({self.branch_angle:g}°): it changes "
+                         "their random growth discretely and cannot be fitted or changed per evaluation; build "
+                         "socbjax.LawnModel(branch_angle=...) at each angle (a grid), or fit the angle on the unit mesh")
+
+    def outcrop_forces(self, values: dict, u, *, reach: float, retract=None, method: str = "displacement",
+                       settings=None) -> tuple:
+        """(forces [n_outcrops, m], ok [n_outcrops]): each realisation's probe force (pN) at
+        probe travels ``u`` [m] (µm), in seed order; ``ok`` False where its path failed or its
+        nodes crossed the surface or probe plane."""
+        self._check_values({k: v for k, v in values.items() if k in self.parameters})
+        u = jnp.asarray(u, jnp.float64)
+        at = jnp.clip(u, 1e-6 * reach, reach)
+        forces, oks, order = [], [], []
+        for group, stacked in zip(self.topology_groups, self._stacked):
+            nets = self._member_values(values, stacked)
+
+            def one(net):
+                r = compress(net, reach, at=at, unload=retract is not None, method=method, settings=settings,
+                             perturbation=values.get("perturbation"), throw=False)
+                f = r.force[:u.shape[0]]
+                if retract is not None:
+                    f = jnp.where(np.asarray(retract, bool), r.force[u.shape[0]:][::-1], f)
+                return f, jnp.all(r.converged) & (r.result != RESULTS.surface_crossed)
+
+            f, ok = jax.vmap(one)(nets)
+            forces.append(f)
+            oks.append(ok)
+            order.extend(group)
+        inverse = np.argsort(np.asarray(order))
+        forces, oks = jnp.concatenate(forces)[inverse], jnp.concatenate(oks)[inverse]
+        return jnp.where(u[None, :] > 0, forces, 0.0), oks
+
+    def lawn_forces(self, values: dict, u, *, reach: float, retract=None, method: str = "displacement",
+                    settings=None) -> tuple:
+        """(forces [n_outcrops, m], ok [n_outcrops]): the lawn force (pN) at probe travels
+        ``u`` [m] (µm) if every outcrop under the probe were realisation k (ρ A F_k, or
+        2π R ρ ∫₀^δ F_k for the sphere); their mean is the model's force.  ``ok[k]`` is False
+        where realisation k's path failed or its nodes crossed the surface or probe plane."""
+        density = values.get("density", self.parameters["density"].value)
+        u = jnp.asarray(u, jnp.float64)
+        if self.probe_radius is None:
+            forces, ok = self.outcrop_forces(values, u, reach=reach, retract=retract, method=method, settings=settings)
+            return density * self.probe_area * forces, ok
+        # sphere: F_k solved on a grid of probe travels and integrated exactly as its
+        # piecewise-linear interpolant (so d/dδ of the force is 2π R ρ F_k(δ) interpolated)
+        grid = _travel_grid(reach)
+        on_retract = np.zeros(u.shape[0], bool) if retract is None else np.asarray(retract, bool)
+        total = jnp.zeros((self.n_outcrops, u.shape[0]))
+        ok = jnp.ones(self.n_outcrops, bool)
+        for branch in sorted(set(on_retract.tolist())):
+            forces, fine = self.outcrop_forces(values, jnp.asarray(grid), reach=reach,
+                                               retract=np.ones(grid.size, bool) if branch else None, method=method,
+                                               settings=settings)
+            value = jax.vmap(lambda f: _integral(grid, f, u))(forces)
+            total = jnp.where(on_retract[None, :] == branch, 2 * math.pi * self.probe_radius * density * value, total)
+            ok = ok & fine
+        return jnp.where(u[None, :] > 0, total, 0.0), ok
+
+    def probe_force(self, values: dict, u, *, reach: float, retract=None, method: str = "displacement",
+                    settings=None, throw: bool = False) -> tuple:
+        """(force [m], ok): the lawn's probe force (pN) at probe travels ``u`` [m] (µm), the
+        mean of :meth:`lawn_forces` over the realisations; see
+        :meth:`socbjax.FitModel.probe_force` (``throw`` is ignored: the realisations are vmapped)."""
+        forces, ok = self.lawn_forces(values, u, reach=reach, retract=retract, method=method, settings=settings)
+        return jnp.mean(forces, axis=0), jnp.all(ok)
+
+    def realisation_covariance(self, values: dict, compression, *, reach: float, retract=None, method="displacement",
+                               settings=None) -> np.ndarray:
+        """[m, m] covariance (pN²) of the model force at the data compressions (µm; contact
+        terms of ``values`` applied) that comes from averaging ``n_outcrops`` random
+        realisations: the sample covariance of :meth:`lawn_forces` over them / n_outcrops
+        (zeros for a single realisation)."""
+        c = np.asarray(compression, float)
+        u = c + float(values.get("contact_offset", 0.0)) - float(values.get("contact_point", 0.0))
+        physical = {k: v for k, v in values.items() if k not in NUISANCE_PARAMETERS}
+        forces, _ = self.lawn_forces(physical, u, reach=reach, retract=retract, method=method, settings=settings)
+        forces = np.asarray(forces) * float(values.get("force_scale", 1.0))
+        if self.n_outcrops < 2:
+            return np.zeros((c.size, c.size))
+        return np.cov(forces, rowvar=False, ddof=1).reshape(c.size, c.size) / self.n_outcrops
+
+    def realisation_spread(self, values: dict, compression, *, reach: float | None = None):
+        """(mean [m], standard error [m]) of the lawn force (pN) over the realisations at the
+        data compressions (µm; contact terms of ``values`` applied): the standard error of the
+        mean over ``n_outcrops`` realisations is the part of the prediction's uncertainty that
+        comes from the finite sample of random outcrops."""
+        c = np.asarray(compression, float)
+        u = c + float(values.get("contact_offset", 0.0)) - float(values.get("contact_point", 0.0))
+        reach = min(float(np.max(u)), 0.95 * self.gap) if reach is None else reach
+        physical = {k: v for k, v in values.items() if k not in NUISANCE_PARAMETERS}
+        forces, _ = self.lawn_forces(physical, u, reach=reach)
+        forces = np.asarray(forces)
+        se = forces.std(axis=0, ddof=1) / np.sqrt(self.n_outcrops) if self.n_outcrops > 1 else np.zeros(c.size)
+        return forces.mean(axis=0), se
+
+    def realisation_errors(self, problem, values: dict, J, z) -> dict:
+        """Standard error of each free parameter (in its unit) that comes from the finite
+        sample of realisations, by the delta method: with the residual Jacobian J [m, p] in
+        the unconstrained variables z at the optimum, A = JᵀJ, Σ_r = Σ_F/σσᵀ (Σ_F from
+        :meth:`realisation_covariance`), Cov_z = A⁻¹ Jᵀ Σ_r J A⁻¹, mapped by D = dθ/dz."""
+        table = problem.table
+        D = np.array([float(jax.grad(table[n].to_value)(float(z[i]))) for i, n in enumerate(problem.free)])
+        cov_f = self.realisation_covariance(values, problem.compression, reach=problem.reach, retract=problem.retract)
+        sigma = np.asarray(problem.sigma, float)
+        cov_r = cov_f / np.outer(sigma, sigma)
+        A_inv = np.linalg.pinv(J.T @ J)
+        cov_z = A_inv @ J.T @ cov_r @ J @ A_inv
+        se = np.abs(D) * np.sqrt(np.abs(np.diag(cov_z)))
+        return dict(zip(problem.free, map(float, se)))
+
+def _travel_grid(reach: float) -> np.ndarray:
+    """Probe travels (µm) at which F̄ is solved for the sphere: geometric near contact, where
+    the force of an inextensible network rises to its buckling plateau within ~1e-4 of the
+    travel, then uniform; the first point is F̄'s limit at contact (1e-7 of the reach)."""
+    return np.concatenate([reach * np.geomspace(1e-7, 0.02, _GRID // 4, endpoint=False),
+                           reach * np.linspace(0.02, 1.0, _GRID - _GRID // 4)])
+
+
+def _integral(grid: np.ndarray, values, x):
+    """∫₀^x of the piecewise-linear interpolant of ``values`` on ``grid`` (increasing; the
+    interpolant is continued flat from grid[0] to 0), exact; x clipped to [0, grid[-1]]."""
+    h = np.diff(grid)
+    cumulative = jnp.concatenate([jnp.zeros(1), jnp.cumsum(0.5 * (values[1:] + values[:-1]) * h)])
+    x = jnp.clip(x, 0.0, grid[-1])
+    k = jnp.clip(jnp.searchsorted(jnp.asarray(grid), x, side="right") - 1, 0, grid.size - 2)
+    t = jnp.maximum(x - jnp.asarray(grid)[k], 0.0)
+    slope = (values[k + 1] - values[k]) / jnp.asarray(h)[k]
+    head = values[0] * jnp.minimum(x, grid[0])  # [0, grid[0]]: F̄(0⁺)
+    return head + cumulative[k] + values[k] * t + 0.5 * slope * t**2
