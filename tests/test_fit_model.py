@@ -42,6 +42,21 @@ def test_predict_is_differentiable(column):
     np.testing.assert_allclose(float(g[1]), float((f(0.08, 0.01 + h) - f(0.08, 0.01 - h)) / (2 * h)), rtol=1e-5)
 
 
+def test_both_branch_residuals_vanish_at_the_truth(column):
+    """branch="both": approach points first, then retract points, each on its own branch of
+    one path; the residuals of a curve made by the model vanish at its values only."""
+    c = np.linspace(-0.05, 0.2, 11)
+    up = np.asarray(column.predict({"EI": 0.1}, c))
+    down = np.asarray(column.predict({"EI": 0.1}, c, branch="unloading"))
+    curve = sj.ForceCurve(np.r_[c, c[::-1]], np.r_[up, down[::-1]], np.r_[np.zeros(11), np.ones(11)].astype(np.int8))
+    problem = sj.fit_problem(curve, column, free=("EI",), initial={"EI": 0.1}, branch="both")
+    assert problem.retract.tolist() == [False] * 11 + [True] * 11
+    assert np.abs(np.asarray(problem.residuals(problem.z0))).max() < 1e-6 * up.max()
+    with pytest.raises(ValueError, match="needs a socbjax.ForceCurve"):
+        sj.fit((c, up), column, settings=sj.FitSettings(branch="both"))
+
+
+@pytest.mark.slow  # 30 s; the default suite checks the both-branch residuals at the truth
 def test_both_branches_fit_and_hysteresis(column):
     """A pinned–pinned column is elastic: approach and retract coincide (no hysteresis); a fit
     of both branches recovers EI and reports data and model hysteresis ≈ 0."""
@@ -58,6 +73,7 @@ def test_both_branches_fit_and_hysteresis(column):
         sj.fit((c, up), column, settings=sj.FitSettings(branch="both"))
 
 
+@pytest.mark.slow  # 26 s; the default suite checks predict's contact shift
 def test_contact_point_start_and_recovery(column):
     """Data shifted by 0.05 µm: the free contact point starts where the force leaves the
     baseline and the fit recovers the shift and EI.  The force of an inextensible column

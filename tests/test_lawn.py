@@ -83,6 +83,7 @@ def test_gradients_match_finite_differences(flat):
     np.testing.assert_allclose(float(g[1]), float(fd_cp), rtol=1e-5)
 
 
+@pytest.mark.slow  # 30 s; the default suite checks the flat disc against independent compressions
 def test_sphere_matches_sum_over_rings(flat):
     """Sphere of radius R: an outcrop at distance r is compressed by δ − r²/(2R); summing
     ρ 2πr dr F̄ over fine rings (midpoint rule in r, each ring's F̄ from the realisations)
