@@ -132,7 +132,7 @@ def test_recovers_ei_and_contact_point_from_other_realisations():
     so the realisations differ), 2 % noise, contact point shifted by 0.04 µm; the model (its
     own seeds) recovers EI within 5 % at the known density, the contact point within one
     point spacing, and reports the realisations' share of the uncertainty."""
-    lawn = dict(generations=3, film_height=3.0, dim=3, n_outcrops=8, probe_area=12.0)
+    lawn = dict(generations=3, film_height=3.0, dim=2, n_outcrops=4, probe_area=12.0)  # 3D: > 25 CPU-min
     truth = sj.LawnModel(seed=100, **lawn)
     c = np.linspace(-0.1, 0.3, 41)
     EI, cp = 0.09, 0.04
