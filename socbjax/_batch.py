@@ -49,6 +49,7 @@ from ._curve_inputs import (
     read_curve,
     sha256,
 )
+from ._fit_model import contact_shift
 
 __all__ = ["BatchResult", "fit_batch", "compare_batch", "collect_curve_files", "read_curve", "curve_from_result",
            "check_dimension", "ACTIN_EI", "BASE_COLUMNS"]
@@ -86,7 +87,7 @@ def _contact(result, curve) -> tuple[float, float, str]:
     fitted = [n for n in ("contact_point", "contact_offset") if n in free]
     if not fitted:
         return base, 0.0, "curve"
-    shift = float(values.get("contact_point", 0.0)) - float(values.get("contact_offset", 0.0))
+    shift = -float(contact_shift(values))
     return base - shift, shift, "fitted " + " and ".join(fitted)
 
 

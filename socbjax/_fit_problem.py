@@ -25,6 +25,7 @@ import numpy as np
 from ._afm import ForceCurve
 from ._compress import compress
 from ._fit_model import FitModel, contact_shift, data_terms
+from ._goodness import estimate_noise
 from ._models import make_fit_model
 from ._parameters import NUISANCE_PARAMETERS, Parameter
 from ._path import PathSettings
@@ -201,8 +202,8 @@ def parameter_table(model: FitModel, free, fixed, initial, bounds) -> tuple[dict
 
 def _contact_start(c, F, retract, parameter: Parameter) -> float:
     """A start for a free ``contact_point`` (µm): the first approach compression where the force
-    leaves the baseline (median of the points before c = 0) by more than 5 × its noise (MAD of
-    first differences / 0.954) and 5 % of the force range; 0 when the curve has fewer than 5
+    leaves the baseline (median of the points before c = 0) by more than 5 × its noise
+    (:func:`socbjax.estimate_noise`) and 5 % of the force range; 0 when the curve has fewer than 5
     points before contact or never leaves it.  A gradient cannot find the contact of a network
     whose force rises within 10⁻⁴ µm of contact (the residuals are flat in it between data
     points), so the start must be close."""
@@ -212,7 +213,7 @@ def _contact_start(c, F, retract, parameter: Parameter) -> float:
     if before.sum() < 5:
         return 0.0
     base = float(np.median(F[before]))
-    noise = float(np.median(np.abs(np.diff(F[before])))) / 0.954
+    noise = estimate_noise(F[before])
     threshold = max(5 * noise, 0.05 * float(np.ptp(F)))
     leaves = np.flatnonzero(F - base > threshold)
     if leaves.size == 0:

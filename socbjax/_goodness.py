@@ -35,6 +35,8 @@ import math
 
 import numpy as np
 
+from ._fit_model import contact_shift
+
 __all__ = ["estimate_noise", "runs_test", "RunsTest", "lag1_autocorrelation", "information_criteria",
            "goodness_of_fit", "Goodness", "judge_fit", "MISFIT_P", "MIN_BASELINE_POINTS", "MISFIT_PREFIX", "NOISE_SOURCES"]
 
@@ -275,7 +277,7 @@ def judge_fit(problem, values: dict, r: np.ndarray, sigma_given: bool) -> Goodne
     c + shift < 0, in contact those with c + shift > 0 (shift = contact_offset − contact_point,
     µm); approach and retract points (``problem.retract``) are separate groups."""
     c = np.asarray(problem.compression, float)
-    shifted = c + float(values.get("contact_offset", 0.0)) - float(values.get("contact_point", 0.0))
+    shifted = c + float(contact_shift(values))
     return goodness_of_fit(c, problem.force, problem.force + r, len(problem.free),
                            sigma=problem.sigma if sigma_given else None, baseline=(c < 0) & (shifted < 0),
                            contact=shifted > 0, groups=getattr(problem, "retract", None))

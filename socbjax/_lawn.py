@@ -39,7 +39,7 @@ import numpy as np
 from ._checks import check_int, check_real
 from ._compress import compress
 from ._dendritic import dendritic_outcrop
-from ._fit_model import FitModel
+from ._fit_model import FitModel, contact_shift
 from ._parameters import NUISANCE_PARAMETERS, Parameter
 from ._solution import RESULTS
 
@@ -228,6 +228,15 @@ class LawnModel(FitModel):
         forces, ok = self.lawn_forces(values, u, reach=reach, retract=retract, method=method, settings=settings)
         return jnp.mean(forces, axis=0), jnp.all(ok)
 
+    def _realisations(self, values: dict, c: np.ndarray, *, reach: float, retract=None, method="displacement",
+                      settings=None) -> np.ndarray:
+        """[n_outcrops, m] :meth:`lawn_forces` (pN, numpy) at the data compressions ``c`` with
+        the contact shift of ``values`` applied, the curve's other terms left out."""
+        physical = {k: v for k, v in values.items() if k not in NUISANCE_PARAMETERS}
+        u = c + float(contact_shift(values))
+        forces, _ = self.lawn_forces(physical, u, reach=reach, retract=retract, method=method, settings=settings)
+        return np.asarray(forces)
+
     def realisation_covariance(self, values: dict, compression, *, reach: float, retract=None, method="displacement",
                                settings=None) -> np.ndarray:
         """[m, m] covariance (pN²) of the model force at the data compressions (µm; contact
@@ -235,10 +244,8 @@ class LawnModel(FitModel):
         realisations: the sample covariance of :meth:`lawn_forces` over them / n_outcrops
         (zeros for a single realisation)."""
         c = np.asarray(compression, float)
-        u = c + float(values.get("contact_offset", 0.0)) - float(values.get("contact_point", 0.0))
-        physical = {k: v for k, v in values.items() if k not in NUISANCE_PARAMETERS}
-        forces, _ = self.lawn_forces(physical, u, reach=reach, retract=retract, method=method, settings=settings)
-        forces = np.asarray(forces) * float(values.get("force_scale", 1.0))
+        forces = self._realisations(values, c, reach=reach, retract=retract, method=method, settings=settings)
+        forces = forces * float(values.get("force_scale", 1.0))
         if self.n_outcrops < 2:
             return np.zeros((c.size, c.size))
         return np.cov(forces, rowvar=False, ddof=1).reshape(c.size, c.size) / self.n_outcrops
@@ -249,11 +256,9 @@ class LawnModel(FitModel):
         mean over ``n_outcrops`` realisations is the part of the prediction's uncertainty that
         comes from the finite sample of random outcrops."""
         c = np.asarray(compression, float)
-        u = c + float(values.get("contact_offset", 0.0)) - float(values.get("contact_point", 0.0))
-        reach = min(float(np.max(u)), 0.95 * self.gap) if reach is None else reach
-        physical = {k: v for k, v in values.items() if k not in NUISANCE_PARAMETERS}
-        forces, _ = self.lawn_forces(physical, u, reach=reach)
-        forces = np.asarray(forces)
+        if reach is None:
+            reach = min(float(np.max(c + float(contact_shift(values)))), 0.95 * self.gap)
+        forces = self._realisations(values, c, reach=reach)
         se = forces.std(axis=0, ddof=1) / np.sqrt(self.n_outcrops) if self.n_outcrops > 1 else np.zeros(c.size)
         return forces.mean(axis=0), se
 
