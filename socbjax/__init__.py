@@ -29,7 +29,7 @@ __all__ = [
     "__version__",
     # networks
     "Network", "Topology", "make_network", "cantilever", "column", "SUPPORTS", "unit_dendritic_mesh",
-    "dendritic_outcrop", "probe_network", "strand_perturbation",
+    "dendritic_outcrop", "pad_outcrop", "Padding", "universal_strands", "probe_network", "strand_perturbation",
     # solving
     "solve", "Solution", "FilamentCurve", "buckling_load", "compress", "CompressionResult", "LimitPoint", "PHASES",
     "compress_ensemble", "EnsembleResult", "PathSettings", "NaturalParameter", "PseudoArclength", "Checkpoint",

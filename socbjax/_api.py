@@ -37,7 +37,8 @@ from ._jointed import JointedModel, JointedState  # noqa: E402
 from ._linear import Bordered, ColouredSparseLU, DenseLU  # noqa: E402
 from ._models import FIT_MODELS, ColumnModel, FitModel, OutcropModel, UnitMeshModel, make_fit_model  # noqa: E402
 from ._lawn import LawnModel  # noqa: E402
-from ._network import Network, Topology, make_network  # noqa: E402
+from ._network import Network, Padding, Topology, make_network  # noqa: E402
+from ._padding import pad_outcrop, universal_strands  # noqa: E402
 from ._parameters import NUISANCE_PARAMETERS, Parameter  # noqa: E402
 from ._path import (  # noqa: E402
     NaturalParameter, NoRecorder, PathProblem, PathSettings, PathState, PseudoArclength, StepRecorder, follow_path, start_path,

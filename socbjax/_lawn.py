@@ -14,9 +14,11 @@ number of outcrops under the probe times their mean force F̄(u) (pN) at probe t
 
 F̄ is the average over the realisations, evaluated as one vmapped
 :func:`socbjax.compress` (``at=`` the probe travels, exact equilibria with implicit
-derivatives) per group of realisations that share a topology (one compiled program per
-group; see ``docs/lawn.md`` for why realisations of different topology are not yet padded to
-one).  The same seeds are used at every evaluation — common random numbers across the
+derivatives): every realisation is padded to the universal tree of its growth rules
+(:func:`socbjax.pad_outcrop`, inert free tails and subtrees), so all seeds are one batch of
+one topology and a new seed reuses the compiled program.  A realisation that does not fit
+the tree (a last growth of more pieces than a generation's; not with the default 1 µm
+growth in 0.5 µm segments) is solved in a batch of its own topology.  The same seeds are used at every evaluation — common random numbers across the
 iterations of a fit — and :meth:`LawnModel.realisation_spread` gives the spread of the
 realisations, the share of the uncertainty that comes from the finite sample.
 
@@ -40,6 +42,7 @@ from ._checks import check_int, check_real
 from ._compress import compress
 from ._dendritic import dendritic_outcrop
 from ._fit_model import FitModel, contact_shift
+from ._padding import pad_outcrop
 from ._parameters import NUISANCE_PARAMETERS, Parameter
 from ._solution import RESULTS
 
@@ -65,6 +68,11 @@ class LawnModel(FitModel):
     Fit parameters: ``EI`` (pN·µm²), ``density`` (µm⁻²), ``perturbation`` (pN), and
     ``branch_angle`` (deg, fixed only: it is the topology's angle), plus the curve's own
     ``contact_point`` (µm), ``baseline`` (pN), ``baseline_tilt`` (pN/µm).
+
+    Attributes: ``members`` (the realisations as built, one network per seed), ``padded``
+    (indices of those padded to the universal tree, :func:`socbjax.pad_outcrop`: all of
+    them with the default growth) and ``topology_groups`` (the batches, one compiled program
+    each: the padded realisations first, then any that did not fit, by topology).
     """
 
     name = "lawn"
@@ -86,13 +94,9 @@ class LawnModel(FitModel):
                                           segment_length=segment_length, branch_angle=branch_angle, EI=_ACTIN_EI,
                                           seed=self.seed + k, dim=dim) for k in range(self.n_outcrops)]
         self.base = self.members[0]
-        self.groups = {}
-        by_topology: dict = {}
-        for k, net in enumerate(self.members):
-            by_topology.setdefault(net.topology, []).append(k)
-        self.topology_groups = [tuple(v) for v in by_topology.values()]
-        self._stacked = [jax.tree_util.tree_map(lambda *xs: jnp.stack([jnp.asarray(x) for x in xs]),
-                                                *[self.members[k] for k in g]) for g in self.topology_groups]
+        self.groups = {}  # EI groups of FitModel (none: one EI for all filaments)
+        self.generations = int(generations)
+        self.topology_groups, self.padded, self._stacked = _batches(self.members, self.generations)
         self.parameters = {
             "EI": Parameter("EI", _ACTIN_EI, "pN·µm²", lower=0.0, doc="bending stiffness of all filaments"),
             "density": Parameter("density", 1.0, "µm⁻²", lower=0.0, doc="areal density of outcrops on the substrate"),
@@ -117,7 +121,8 @@ class LawnModel(FitModel):
         sizes = [m.n_segments for m in self.members]
         n_topo = len(self.topology_groups)
         lines = [(f"lawn: {self.probe}, film {self.film_height:g} µm, {self.n_outcrops} outcrop realisation(s) "
-                  f"({min(sizes)}–{max(sizes)} segments, {n_topo} topolog{'y' if n_topo == 1 else 'ies'})")]
+                  f"({min(sizes)}–{max(sizes)} segments; {len(self.padded)} padded to one topology, "
+                  f"{n_topo} compiled program{'' if n_topo == 1 else 's'})")]
         for p in self.parameters.values():
             lines.append(f"  {p.name:<14s} default {p.value:<10.4g} {p.unit:<8s} bounds ({p.lower}, {p.upper})  {p.doc}")
         return "\n".join(lines)
@@ -151,15 +156,17 @@ class LawnModel(FitModel):
     def network(self, values: dict):
         """The first realisation at ``values`` (what a diagnosis of a failed path inspects)."""
         self._check_values(values)
-        one = self._member_values({k: v for k, v in values.items() if k in ("EI", "perturbation")},
-                                  self._stacked[0])
-        return jax.tree_util.tree_map(lambda x: x[0], one)
+        return self._member_values({k: v for k, v in values.items() if k in ("EI", "perturbation")}, self.members[0])
 
     def _check_values(self, values: dict) -> None:
         unknown = set(values) - set(self.parameters)
         if unknown:
             raise ValueError(f"lawn has no parameter(s) {sorted(unknown)}; it has {sorted(self.parameters)}")
         angle = values.get("branch_angle", self.branch_angle)
+        p = values.get("perturbation", 1.0)
+        if not isinstance(p, jax.core.Tracer) and not float(p) > 0:
+            raise ValueError(f"the lawn's perturbation must be a positive lateral force (pN), got {float(p)!r}: the "
+                             "outcrops' loads carry it, and a straight strand between probe and surface needs one")
         if not isinstance(angle, jax.core.Tracer) and abs(float(angle) - self.branch_angle) < 1e-12:
             return
         raise ValueError(f"the lawn's branch_angle is its outcrops' topology ({self.branch_angle:g}°): it changes "
@@ -179,8 +186,9 @@ class LawnModel(FitModel):
             nets = self._member_values(values, stacked)
 
             def one(net):
+                # perturbation=None: the loads already carry it (scaled in _member_values)
                 r = compress(net, reach, at=at, unload=retract is not None, method=method, settings=settings,
-                             perturbation=values.get("perturbation"), throw=False)
+                             throw=False)
                 f = r.force[:u.shape[0]]
                 if retract is not None:
                     f = jnp.where(np.asarray(retract, bool), r.force[u.shape[0]:][::-1], f)
@@ -276,6 +284,22 @@ class LawnModel(FitModel):
         cov_z = A_inv @ J.T @ cov_r @ J @ A_inv
         se = np.abs(D) * np.sqrt(np.abs(np.diag(cov_z)))
         return dict(zip(problem.free, map(float, se)))
+
+def _batches(members, generations: int):
+    """(index groups, padded indices, stacked networks): the realisations that fit the
+    universal tree (:func:`socbjax.pad_outcrop`) padded and stacked as one batch (one
+    compiled program for every seed), each other realisation grouped by its own topology."""
+    padded, rest = {}, {}
+    for k, net in enumerate(members):
+        try:
+            padded[k] = pad_outcrop(net, generations)[0]
+        except ValueError:
+            rest.setdefault(net.topology, []).append(k)
+    groups = ([tuple(padded)] if padded else []) + [tuple(v) for v in rest.values()]
+    stacked = [jax.tree_util.tree_map(lambda *xs: jnp.stack([jnp.asarray(x) for x in xs]),
+                                      *[padded.get(k, members[k]) for k in g]) for g in groups]
+    return groups, tuple(padded), stacked
+
 
 def _travel_grid(reach: float) -> np.ndarray:
     """Probe travels (µm) at which F̄ is solved for the sphere: geometric near contact, where

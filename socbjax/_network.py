@@ -56,7 +56,7 @@ from ._network_checks import (
     unit_tangents,
 )
 
-__all__ = ["DIFFERENTIABLE_FIELDS", "Network", "Topology", "add_direction", "is_traced", "make_network"]
+__all__ = ["DIFFERENTIABLE_FIELDS", "Network", "Padding", "Topology", "add_direction", "is_traced", "make_network"]
 
 # Network arrays that carry values (traced, differentiable); everything else is topology.
 DIFFERENTIABLE_FIELDS = ("positions", "tangents", "lengths", "EI", "loads", "couples")
@@ -116,6 +116,21 @@ class Topology:
         return f"Topology(dim={self.dim}, nodes={n}, segments={s}, key={self.key[:12]})"
 
 
+class Padding(eqx.Module):
+    """Per-realisation supports of a network padded to a common topology (values, traced and
+    batched like the network's other values; see :func:`socbjax.pad_outcrop`).
+
+    ``projector`` [N, d, d] replaces the topology's ``position_projector`` (which nodes are
+    pinned may differ between the realisations that share one compiled program);
+    ``active`` [N] (1.0 or 0.0) marks the nodes of the realisation itself: padding nodes
+    (0.0) are unloaded free tails and subtrees that carry no force, and the surface checks
+    ignore them.
+    """
+
+    projector: Float[Array, "N d d"]
+    active: Float[Array, " N"]
+
+
 class Network(eqx.Module):
     """A filament network: traced values plus a static :class:`Topology`.
 
@@ -129,6 +144,8 @@ class Network(eqx.Module):
     couples : 2D [N], 3D [N, 3] fixed external nodal couples (pN·µm).
     topology : the static structure (``segments``, supports, junctions, probe, ...), whose
         arrays are also available as read-only numpy attributes of the network.
+    padding : None, or the :class:`Padding` of a realisation padded to a common topology
+        (its supports override the topology's ``position_projector``).
     """
 
     positions: Float[Array, "N d"]
@@ -138,6 +155,7 @@ class Network(eqx.Module):
     loads: Float[Array, "N d"]
     couples: Array
     topology: Topology = eqx.field(static=True)
+    padding: Padding | None = None
 
     # ---------------------------------------------------------------- structure views
     @property
@@ -145,7 +163,13 @@ class Network(eqx.Module):
         return self.topology.dim
 
     segments = property(lambda self: self.topology.segments)
-    position_projector = property(lambda self: self.topology.position_projector)
+
+    @property
+    def position_projector(self):
+        """[N, d, d] per-node projector onto the prescribed directions: the topology's, or a
+        padded network's own (a value, possibly traced)."""
+        return self.topology.position_projector if self.padding is None else self.padding.projector
+
     clamped = property(lambda self: self.topology.clamped)
     moment_free = property(lambda self: self.topology.moment_free)
     attach = property(lambda self: self.topology.attach)
@@ -201,6 +225,8 @@ class Network(eqx.Module):
 
     def with_topology(self, **structure) -> Network:
         """The same values on a topology with some structure arrays replaced."""
+        if self.padding is not None:
+            raise ValueError("with_topology: a padded network's supports are values; change the unpadded network")
         return Network(**{k: getattr(self, k) for k in DIFFERENTIABLE_FIELDS}, topology=self.topology.replace(**structure))
 
 

@@ -52,18 +52,26 @@ def probe_network(network: Network) -> Network:
 
 
 def end_nodes(network: Network) -> np.ndarray:
-    """Supported non-probe nodes that are not daughter bases (strand ends on the surface)."""
-    fixed = np.einsum("nii->n", network.position_projector) > 0.5
+    """Supported non-probe nodes that are not daughter bases (strand ends on the surface).
+    A padded network's strand ends are values that differ between its realisations, so
+    its end nodes are those of the topology (host side: a static index list)."""
+    fixed = np.einsum("nii->n", network.topology.position_projector) > 0.5
     return np.flatnonzero(fixed & ~network.probe & ~network.attached)
 
 
 def _probe_frame(network: Network):
     """(origin, gap) of the probe's frame: the probe nodes' mean reference position and the
     height of the farthest opposing support along the probe direction (µm; None if nothing
-    opposes the probe).  numpy for concrete positions, traced with traced ones."""
-    pos = network.positions if is_traced(network.positions) else np.asarray(network.positions)
-    fixed = (np.einsum("nii->n", network.position_projector) > 0.5) & ~network.probe
+    opposes the probe).  numpy for concrete positions, traced with traced ones; a padded
+    network's gap is traced (its supports are values) and counts its active nodes only."""
+    traced = is_traced(network.positions)
+    pos = network.positions if traced else np.asarray(network.positions)
     origin = pos[network.probe].mean(axis=0)
+    if network.padding is not None:
+        fixed = (jnp.einsum("nii->n", network.padding.projector) > 0.5) & ~network.probe & (network.padding.active > 0.5)
+        heights = (pos - origin) @ jnp.asarray(network.probe_direction)
+        return origin, jnp.max(jnp.where(fixed, heights, -jnp.inf))
+    fixed = (np.einsum("nii->n", network.position_projector) > 0.5) & ~network.probe
     gap = ((pos[fixed] - origin) @ np.asarray(network.probe_direction)).max() if fixed.any() else None
     return origin, gap
 
@@ -72,7 +80,8 @@ def probe_gap(network: Network) -> float:
     """Largest probe travel (µm) before the probe meets the farthest opposing support (inf if
     none; host side, concrete positions)."""
     gap = _probe_frame(network)[1]
-    return np.inf if gap is None else float(gap)
+    gap = np.inf if gap is None else float(gap)
+    return np.inf if gap == -np.inf else gap  # -inf: a padded network without pins
 
 
 # Nodes may sit this far beyond a plane before the crossing is flagged (µm, plus the same
@@ -88,14 +97,16 @@ def surface_crossing(network: Network, positions, displacement):
     the probe plane h = u (probe displacement of the row).  ``positions`` [K, N, d] (µm),
     ``displacement`` [K] (µm); numpy in, numpy out; JAX arrays (traced) in, JAX out.  Until
     contact exists (no contact model yet) a crossing is a flagged status, never success."""
-    xp = jnp if is_traced(positions, displacement) or isinstance(positions, jax.Array) else np
+    padded = network.padding is not None
+    xp = jnp if padded or is_traced(positions, displacement) or isinstance(positions, jax.Array) else np
     origin, gap = _probe_frame(network)
     if gap is None:
         return xp.zeros(np.shape(displacement), bool)
-    tol = CROSSING_TOLERANCE * (1.0 + abs(gap))
+    tol = CROSSING_TOLERANCE * (1.0 + xp.abs(gap))
     heights = (positions - origin) @ np.asarray(network.probe_direction)  # [K, N]
-    beyond_surface = xp.any(heights > gap + tol, axis=-1)
-    behind_probe = xp.any(heights < xp.asarray(displacement)[..., None] - tol, axis=-1)
+    active = network.padding.active > 0.5 if padded else True  # padding nodes may lie anywhere
+    beyond_surface = xp.any((heights > gap + tol) & active, axis=-1)
+    behind_probe = xp.any((heights < xp.asarray(displacement)[..., None] - tol) & active, axis=-1)
     return beyond_surface | behind_probe
 
 

@@ -10,12 +10,14 @@ products (milliseconds).  The jointed model is probed (:func:`socbjax._linear.sp
 
 The pattern depends only on the topology: it is computed once per topology on a *template*
 network (the same topology with random values, loads and couples, so that it holds for any
-values), cached, and reused by every solve, compression, ensemble and fit of that topology —
+values; a padded network's template is half-pinned at every node, so that it holds for any
+pins, :class:`socbjax.Padding`), cached, and reused by every solve, compression, ensemble and fit of that topology —
 also when the actual values are traced.
 """
 
 from __future__ import annotations
 
+import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
@@ -23,7 +25,7 @@ import scipy.sparse as sp
 from jax.flatten_util import ravel_pytree
 
 from ._linear import ColouredSparseLU, DenseLU, solver_kind, sparsity_pattern
-from ._network import DIFFERENTIABLE_FIELDS
+from ._network import DIFFERENTIABLE_FIELDS, Padding
 from ._residual import Control, SOCBModel
 
 __all__ = ["structural_pattern", "prepare_sparse_solver", "linear_solver_for", "template_model"]
@@ -61,7 +63,12 @@ def template_model(model):
         if name == "tangents":
             v = v / np.linalg.norm(v, axis=-1, keepdims=True)
         values[name] = jnp.asarray(v)
-    return type(model)(net.replace(**values), *[getattr(model, f) for f in ("quad",) if hasattr(model, f)])
+    net = net.replace(**values)
+    if net.padding is not None:  # pins are values: half-pinned everywhere has the union pattern
+        d = net.dim
+        net = eqx.tree_at(lambda n: n.padding, net, Padding(projector=jnp.broadcast_to(0.5 * jnp.eye(d), (net.n_nodes, d, d)),
+                                                            active=jnp.ones(net.n_nodes)))
+    return type(model)(net, *[getattr(model, f) for f in ("quad",) if hasattr(model, f)])
 
 
 def _residual_fn(template):
@@ -98,7 +105,7 @@ def _refined(template, x0, fn) -> ColouredSparseLU:
 
 def prepare_sparse_solver(model) -> ColouredSparseLU:
     """The :class:`ColouredSparseLU` for ``model``'s Jacobian (cached per topology)."""
-    key = (model.network.topology, type(model).__name__, getattr(model, "quad", None))
+    key = (model.network.topology, model.network.padding is not None, type(model).__name__, getattr(model, "quad", None))
     if key in _PREPARED:
         return _PREPARED[key]
     # Host-side set-up from random template values, also when called while the user's
