@@ -2,10 +2,15 @@
 flat probe, the curve simulated with *other* outcrop seeds than the model's, 2 % noise, and
 the contact point shifted; fitted jointly with the contact point and baseline.
 
-Truth: ``LawnModel(seed=100, ...)`` (outcrop seeds 100 …), EI = 0.09 pN·µm², density
+Truth: ``LawnModel(seed=102, ...)`` (outcrop seeds 102 …), EI = 0.09 pN·µm², density
 1.5 µm⁻², contact point 0.04 µm; 41 compressions from −0.1 to 0.25 µm (the first ones
 before contact, the baseline from which the noise is estimated); noise N(0, (0.02 F_max)²).
-Model: ``LawnModel(seed=0, ...)`` (outcrop seeds 0 …).  At fixed geometry the force is
+Model: ``LawnModel(seed=2, ...)`` (outcrop seeds 2 …).  Planar outcrops of 4 generations
+at a 3 µm film: seeds 0, 1, 100 and 101 cross the surface before 0.13 µm (no contact model
+yet, so such a path is not physical and the fit would fail), seeds 2, 3, 102 and 103 do not
+before 0.5 µm.  In 2D seeds 2 and 3 are mirror images (equal forces), so the model's
+realisation error is ~0 while the truth's realisations differ (102: +28 % force): the
+EI bias this shows is the finite-sample bias of averaging two realisations.  At fixed geometry the force is
 exactly proportional to EI · density, so one curve determines only their product; each is
 therefore recovered with the other held at its independently known value (the fit refuses
 both free):
@@ -21,7 +26,8 @@ the contact point error and the misfit flags; the summary counts the seeds withi
 10 % (density) and 2 SE.
 
 Run:  PYTHONPATH=. python benchmarks/lawn_recovery.py [--quick] [--out DIR]
-      (full: 10 noise seeds, 4 outcrops of 3 generations; --quick: 2 seeds, 2 outcrops)
+      (full: 10 noise seeds; --quick: 1 seed; 2 outcrops of 4 generations, 2D; one lawn fit
+      takes ≈ 3.5 min on 2 CPU cores, the full run ≈ 75 min)
 """
 
 from __future__ import annotations
@@ -60,9 +66,9 @@ def _column(curve) -> dict:
 
 def main(argv=None) -> int:
     args = _common.parse_args(__doc__, argv)
-    seeds, outcrops = (range(2), 2) if args.quick else (range(10), 4)
-    lawn = {"generations": 3, "film_height": 3.0, "dim": 3, "n_outcrops": outcrops, "probe_area": 12.0}
-    truth, model = sj.LawnModel(seed=100, **lawn), sj.LawnModel(seed=0, **lawn)
+    seeds, outcrops = (range(1), 2) if args.quick else (range(10), 2)
+    lawn = {"generations": 4, "film_height": 3.0, "dim": 2, "n_outcrops": outcrops, "probe_area": 12.0}
+    truth, model = sj.LawnModel(seed=102, **lawn), sj.LawnModel(seed=2, **lawn)
     c = np.linspace(-0.1, REACH, 41)
     clean = np.asarray(truth.predict(TRUTH, c, reach=REACH))
     rows = []
@@ -80,7 +86,7 @@ def main(argv=None) -> int:
                       _common.fmt(r.get("contact_point_error_um"), "+.4f"), r["misfit"],
                       _common.fmt(r["chi2_reduced"], ".2f"), _common.fmt(r["seconds"], ".0f")])
     _common.print_table(["noise seed", "fit", "rel. error", "z", "contact pt err (µm)", "misfit", "chi2_red", "s"], table,
-                        title=f"lawn recovery, {outcrops} outcrops (seeds 0…) fitting a lawn of seeds 100…, 2 % noise")
+                        title=f"lawn recovery, {outcrops} outcrops (seeds 2…) fitting a lawn of seeds 102…, 2 % noise")
     summary = {}
     for target, limit in (("EI", 0.05), ("density", 0.10)):
         sel = [r for r in rows if r["fit"] == target]

@@ -29,6 +29,7 @@ SCRIPTS = [
     "gradient_cost",
     "solve_gradient_cost",
     "fit_recovery",
+    "lawn_throughput",
     "peers/elastica_comparison",  # PyElastica columns only with the extra socbjax[peers]
 ]
 
