@@ -78,14 +78,16 @@ def main(argv=None) -> int:
         for row in (_fit(curve, model, "EI", {"density": TRUTH["density"]}),
                     _fit(curve, model, "density", {"EI": TRUTH["EI"]}), _column(curve)):
             rows.append({"noise_seed": seed, **row})
-            print(f"  seed {seed} {row['fit']:<8s} {row.get('rel_error', float('nan')):+.4f}  z {row.get('z', float('nan')):+.2f}  "
-                  f"misfit {row['misfit']}  {row['seconds']:.0f} s", flush=True)
+            rel, z = row.get("rel_error", float("nan")), row.get("z", float("nan"))
+            print(f"  seed {seed} {row['fit']:<8s} {rel:+.4f}  z {z:+.2f}  misfit {row['misfit']}  "
+                  f"{row['seconds']:.0f} s", flush=True)
     table = []
     for r in rows:
-        table.append([r["noise_seed"], r["fit"], _common.fmt(r.get("rel_error"), "+.4f"), _common.fmt(r.get("z"), "+.2f"),
-                      _common.fmt(r.get("contact_point_error_um"), "+.4f"), r["misfit"],
+        table.append([r["noise_seed"], r["fit"], _common.fmt(r.get("rel_error"), "+.4f"),
+                      _common.fmt(r.get("z"), "+.2f"), _common.fmt(r.get("contact_point_error_um"), "+.4f"), r["misfit"],
                       _common.fmt(r["chi2_reduced"], ".2f"), _common.fmt(r["seconds"], ".0f")])
-    _common.print_table(["noise seed", "fit", "rel. error", "z", "contact pt err (µm)", "misfit", "chi2_red", "s"], table,
+    _common.print_table(["noise seed", "fit", "rel. error", "z", "contact pt err (µm)", "misfit", "chi2_red", "s"],
+                        table,
                         title=f"lawn recovery, {outcrops} outcrops (seeds 2…) fitting a lawn of seeds 102…, 2 % noise")
     summary = {}
     for target, limit in (("EI", 0.05), ("density", 0.10)):

@@ -18,8 +18,9 @@ derivatives): every realisation is padded to the universal tree of its growth ru
 (:func:`socbjax.pad_outcrop`, inert free tails and subtrees), so all seeds are one batch of
 one topology and a new seed reuses the compiled program.  A realisation that does not fit
 the tree (a last growth of more pieces than a generation's; not with the default 1 µm
-growth in 0.5 µm segments) is solved in a batch of its own topology.  The same seeds are used at every evaluation — common random numbers across the
-iterations of a fit — and :meth:`LawnModel.realisation_spread` gives the spread of the
+growth in 0.5 µm segments) is solved in a batch of its own topology.  The same seeds are
+used at every evaluation — common random numbers across the iterations of a fit — and
+:meth:`LawnModel.realisation_spread` gives the spread of the
 realisations, the share of the uncertainty that comes from the finite sample.
 
 Identifiability: at fixed geometry the force scales exactly with EI and with ρ, so one curve
@@ -284,6 +285,7 @@ class LawnModel(FitModel):
         cov_z = A_inv @ J.T @ cov_r @ J @ A_inv
         se = np.abs(D) * np.sqrt(np.abs(np.diag(cov_z)))
         return dict(zip(problem.free, map(float, se)))
+
 
 def _batches(members, generations: int):
     """(index groups, padded indices, stacked networks): the realisations that fit the

@@ -86,8 +86,8 @@ def _real_to_universal(net: Network, generations: int, pieces: int, strands) -> 
         capacity = (generations - birth[k] + 1) * pieces
         if len(nodes) > capacity:
             raise ValueError(f"strand {k} has {len(nodes)} segments, more than the {capacity} of its place in the "
-                             f"universal tree ({pieces} per generation): pieces must be the segments of one generation's growth, "
-                             "and the strand's last growth (onto the surface) must need no more")
+                             f"universal tree ({pieces} per generation): pieces must be the segments of one "
+                             "generation's growth, and the strand's last growth (onto the surface) must need no more")
     return uid, chains
 
 

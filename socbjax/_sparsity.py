@@ -66,8 +66,8 @@ def template_model(model):
     net = net.replace(**values)
     if net.padding is not None:  # pins are values: half-pinned everywhere has the union pattern
         d = net.dim
-        net = eqx.tree_at(lambda n: n.padding, net, Padding(projector=jnp.broadcast_to(0.5 * jnp.eye(d), (net.n_nodes, d, d)),
-                                                            active=jnp.ones(net.n_nodes)))
+        half = jnp.broadcast_to(0.5 * jnp.eye(d), (net.n_nodes, d, d))
+        net = eqx.tree_at(lambda n: n.padding, net, Padding(projector=half, active=jnp.ones(net.n_nodes)))
     return type(model)(net, *[getattr(model, f) for f in ("quad",) if hasattr(model, f)])
 
 
