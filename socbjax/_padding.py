@@ -82,12 +82,16 @@ def _real_to_universal(net: Network, generations: int, pieces: int, strands) -> 
                 raise ValueError(f"strand {k} branches off after {slot} segments of its mother, not a whole number of "
                                  f"generations of {pieces}")
             birth.append(birth[mother] + slot // pieces)
+            if (uid[mother], birth[k]) not in lookup:
+                raise ValueError(f"strand {k} is born in generation {birth[k]}, beyond generations={generations}; "
+                                 "pad with the outcrop's own number of generations")
             uid.append(lookup[(uid[mother], birth[k])])
         capacity = (generations - birth[k] + 1) * pieces
         if len(nodes) > capacity:
             raise ValueError(f"strand {k} has {len(nodes)} segments, more than the {capacity} of its place in the "
-                             f"universal tree ({pieces} per generation): pieces must be the segments of one "
-                             "generation's growth, and the strand's last growth (onto the surface) must need no more")
+                             f"universal tree ({generations} generations of {pieces} segments): generations must be the "
+                             "outcrop's own, pieces the segments of one generation's growth, and the strand's last "
+                             "growth (onto the surface) must need no more")
     return uid, chains
 
 

@@ -63,5 +63,8 @@ def test_outcrops_that_do_not_fit_are_refused():
         sj.pad_outcrop(net, 3, pieces=2)
     with pytest.raises(ValueError, match="generations"):
         sj.pad_outcrop(net, 0)
+    deep = sj.dendritic_outcrop(generations=4, gap=3.7, seed=1, dim=2)
+    with pytest.raises(ValueError, match="generations"):
+        sj.pad_outcrop(deep, 2)
     with pytest.raises(TypeError, match="network"):
         sj.pad_outcrop("outcrop", 3)
