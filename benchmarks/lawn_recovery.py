@@ -1,104 +1,143 @@
-"""Recovery from synthetic lawn experiments (issue 17): a film of random 3D outcrops under a
-flat probe, the curve simulated with *other* outcrop seeds than the model's, 2 % noise, and
-the contact point shifted; fitted jointly with the contact point and baseline.
+"""Recovery from synthetic lawn experiments (issue 17): a flat probe on a film of random
+planar outcrops, the curve simulated with *other* outcrops than the model's, 2 % noise and a
+shifted contact point, fitted jointly with the contact point and the baseline.
 
-Truth: ``LawnModel(seed=102, ...)`` (outcrop seeds 102 …), EI = 0.09 pN·µm², density
-1.5 µm⁻², contact point 0.04 µm; 41 compressions from −0.1 to 0.25 µm (the first ones
-before contact, the baseline from which the noise is estimated); noise N(0, (0.02 F_max)²).
-Model: ``LawnModel(seed=2, ...)`` (outcrop seeds 2 …).  Planar outcrops of 4 generations
-at a 3 µm film: seeds 0, 1, 100 and 101 cross the surface before 0.13 µm (no contact model
-yet, so such a path is not physical and the fit would fail), seeds 2, 3, 102 and 103 do not
-before 0.5 µm.  In 2D seeds 2 and 3 are mirror images (equal forces), so the model's
-realisation error is ~0 while the truth's realisations differ (102: +28 % force): the
-EI bias this shows is the finite-sample bias of averaging two realisations.  At fixed geometry the force is
-exactly proportional to EI · density, so one curve determines only their product; each is
-therefore recovered with the other held at its independently known value (the fit refuses
-both free):
+The experiment.  A flat disc of 12 µm² on a 3 µm film of outcrops (4 generations) at density
+ρ = 1.5 µm⁻² presses ρA = 18 outcrops: the truth is ``LawnModel(seeds=<18 seeds>)`` at
+EI = 0.09 pN·µm², ρ = 1.5 µm⁻², contact point 0.0437 µm (between two data points: the force
+of inextensible filaments jumps at contact); 25 compressions from −0.1 to 0.25 µm (10 before
+contact: the baseline from which the noise is estimated); noise N(0, (0.02 F_max)²), one draw
+per noise seed.  The model: ``LawnModel(seeds=<8 other seeds>)`` (8: one fit of 16
+realisations took > 20 min on this 2-core machine).
 
-* fit "EI": free EI, contact_point, baseline; density fixed at the truth;
-* fit "density": free density, contact_point, baseline; EI fixed at the truth;
-* fit "column": the single column (free EI, contact_point, baseline) fitted to the same lawn
-  curve — a misspecified model, whose misfit warning should fire.
+The seed pool.  Without a contact model a realisation whose nodes cross the substrate or the
+probe plane before the largest travel a fit needs cannot be evaluated (in this 2D pool
+about half of them, at 0.3 µm); the pool is screened once (seeds 0 … POOL−1, each compressed
+to 0.3 µm) and model and truth are drawn from the realisations that pass, disjointly.  The
+recovery is therefore that of the screened population, stated as such.  (Planar outcrops:
+3D ones cost ≈ 20 × more per realisation on this 2-core machine, too much for 10 × 3 fits.)
 
-Per noise seed the table gives the relative error, the z-score (error / SE, SE from the
-Gauss–Newton covariance combined with the realisation error of the finite outcrop sample),
-the contact point error and the misfit flags; the summary counts the seeds within 5 % (EI),
-10 % (density) and 2 SE.
+Fits per noise seed.  At fixed geometry the force is exactly proportional to EI · ρ, so one
+curve determines only their product and the fit refuses both free; each is recovered with
+the other held at its independently known value:
+
+* "EI": free EI, contact_point, baseline; density fixed at the truth;
+* "density": free density, contact_point, baseline; EI fixed at the truth (on the first
+  noise seed: it is the EI fit reparametrised, see DENSITY_EVERY_SEED);
+* "column": the single column (free EI, contact_point, baseline) fitted to the same lawn
+  curve, a misspecified model whose misfit warning should fire.
+
+The z-score is error / total SE, the total SE the quadrature sum of the Gauss–Newton SE and
+the realisation SE (the model's 8 realisations and the experiment's 18 outcrops,
+``LawnModel.realisation_covariance``).  The truth's outcrops are one draw shared by all noise
+seeds, so their share of the error is common to every row.
 
 Run:  PYTHONPATH=. python benchmarks/lawn_recovery.py [--quick] [--out DIR]
-      (full: 10 noise seeds; --quick: 1 seed; 2 outcrops of 4 generations, 2D; one lawn fit
-      takes ≈ 3.5 min on 2 CPU cores, the full run ≈ 75 min)
+      (full: 10 noise seeds; --quick: 1; LAWN_RECOVERY_SEEDS=3,4 runs those only; prints
+      each fit as it finishes; one lawn fit ≈ 5 min on 2 cores)
 """
 
 from __future__ import annotations
 
+import os
 import time
 
 import _common  # noqa: F401  (sets OPENBLAS_NUM_THREADS before numpy loads)
+import jax
 import numpy as np
 
 import socbjax as sj
 
-TRUTH = {"EI": 0.09, "density": 1.5, "contact_point": 0.04}
-REACH = 0.25
+TRUTH = {"EI": 0.09, "density": 1.5, "contact_point": 0.0437}
+REACH, SCREEN, POOL = 0.25, 0.3, 96
+LAWN = {"generations": 4, "film_height": 3.0, "dim": 2, "probe_area": 12.0}
+N_MODEL, N_TRUTH = 8, 18
+# At fixed geometry F ∝ EI · ρ exactly, so the density fit at known EI is the EI fit at known
+# ρ reparametrised: the same Levenberg–Marquardt path, ρ̂/ρ = ÊI/EI (measured: identical to
+# 6 digits).  It is run on the first noise seed to show that, on every seed with this True.
+DENSITY_EVERY_SEED = False  # the truth: ρ A = 1.5 µm⁻² × 12 µm² outcrops under the probe
+
+
+def _screen() -> tuple[list, float]:
+    """Seeds of the pool whose realisation can be followed to SCREEN µm, and the seconds."""
+    t0 = time.perf_counter()
+    pool = sj.LawnModel(seed=0, n_outcrops=POOL, **LAWN)
+    _, ok = jax.jit(lambda EI: pool.outcrop_forces({"EI": EI}, np.array([SCREEN]), reach=SCREEN))(0.071)
+    good = [s for s, k in zip(pool.seeds, np.asarray(ok)) if k]
+    return good, time.perf_counter() - t0
 
 
 def _fit(curve, model, target: str, fixed: dict) -> dict:
     t0 = time.perf_counter()
-    result = sj.fit(curve, model, free=(target, "contact_point", "baseline"), fixed=fixed)
+    result = sj.fit(curve, model, free=(target, "contact_point", "baseline"), fixed=fixed, progress=True)
     se = float(result.standard_errors[target])
-    rel = float(result.realisation_errors.get(target, 0.0)) if result.realisation_errors else 0.0
+    rel = float((result.realisation_errors or {}).get(target, 0.0))
     total = float(np.hypot(se, rel))
     error = float(result.values[target] - TRUTH[target])
     return {"fit": target, "seconds": time.perf_counter() - t0, "converged": bool(result.converged),
             "value": float(result.values[target]), "rel_error": error / TRUTH[target], "se": se,
             "realisation_se": rel, "z": error / total if total > 0 else float("inf"),
             "contact_point_error_um": float(result.values["contact_point"] - TRUTH["contact_point"]),
-            "misfit": bool(result.misfit), "chi2_reduced": float(result.chi2_reduced), "noise_pN": float(result.noise)}
+            "misfit": bool(result.misfit), "chi2_reduced": float(result.chi2_reduced),
+            "noise_pN": float(result.noise)}
 
 
 def _column(curve) -> dict:
     t0 = time.perf_counter()
-    result = sj.fit(curve, "column", free=("EI", "contact_point", "baseline"))
+    result = sj.fit(curve, "column", free=("EI", "contact_point", "baseline"), model_options={"dim": 2})
     return {"fit": "column", "seconds": time.perf_counter() - t0, "converged": bool(result.converged),
-            "misfit": bool(result.misfit), "chi2_reduced": float(result.chi2_reduced)}
+            "misfit": bool(result.misfit), "chi2_reduced": float(result.chi2_reduced),
+            "contact_point_error_um": float(result.values["contact_point"] - TRUTH["contact_point"])}
+
+
+def _summary(rows, n_seeds: int) -> dict:
+    summary = {}
+    for target, limit in (("EI", 0.05), ("density", 0.10)):
+        sel = [r for r in rows if r["fit"] == target]
+        summary[target] = {"n": len(sel), "within_limit": sum(abs(r["rel_error"]) < limit for r in sel),
+                           "limit": limit, "within_2se": sum(abs(r["z"]) <= 2 for r in sel),
+                           "misfit": sum(r["misfit"] for r in sel),
+                           "median_rel_error": float(np.median([r["rel_error"] for r in sel])) if sel else None}
+    summary["column"] = {"n": n_seeds, "misfit": sum(r["misfit"] for r in rows if r["fit"] == "column")}
+    return summary
 
 
 def main(argv=None) -> int:
     args = _common.parse_args(__doc__, argv)
-    seeds, outcrops = (range(1), 2) if args.quick else (range(10), 2)
-    lawn = {"generations": 4, "film_height": 3.0, "dim": 2, "n_outcrops": outcrops, "probe_area": 12.0}
-    truth, model = sj.LawnModel(seed=102, **lawn), sj.LawnModel(seed=2, **lawn)
-    c = np.linspace(-0.1, REACH, 41)
+    chosen = os.environ.get("LAWN_RECOVERY_SEEDS")  # e.g. "3,4,5": run these noise seeds only
+    seeds = [int(k) for k in chosen.split(",")] if chosen else [0] if args.quick else list(range(10))
+    good, screen_s = _screen()
+    print(f"pool: {len(good)} of {POOL} seeds followed to {SCREEN} µm ({screen_s:.0f} s)", flush=True)
+    if len(good) < N_MODEL + N_TRUTH:
+        raise SystemExit(f"only {len(good)} usable seeds; raise POOL")
+    model = sj.LawnModel(seeds=good[:N_MODEL], **LAWN)
+    truth = sj.LawnModel(seeds=good[N_MODEL:N_MODEL + N_TRUTH], **LAWN)
+    c = np.linspace(-0.1, REACH, 25)
     clean = np.asarray(truth.predict(TRUTH, c, reach=REACH))
+    lawn = {**LAWN, "model_seeds": model.seeds, "truth_seeds": truth.seeds, "pool": POOL, "screen_um": SCREEN}
     rows = []
     for seed in seeds:
         noisy = clean + 0.02 * clean.max() * np.random.default_rng(seed).standard_normal(c.size)
         curve = (c, noisy)
-        for row in (_fit(curve, model, "EI", {"density": TRUTH["density"]}),
-                    _fit(curve, model, "density", {"EI": TRUTH["EI"]}), _column(curve)):
+        fits = [lambda: _fit(curve, model, "EI", {"density": TRUTH["density"]}), lambda: _column(curve)]
+        if seed == seeds[0] or DENSITY_EVERY_SEED:
+            fits.insert(1, lambda: _fit(curve, model, "density", {"EI": TRUTH["EI"]}))
+        for run in fits:
+            row = run()
             rows.append({"noise_seed": seed, **row})
             rel, z = row.get("rel_error", float("nan")), row.get("z", float("nan"))
             print(f"  seed {seed} {row['fit']:<8s} {rel:+.4f}  z {z:+.2f}  misfit {row['misfit']}  "
-                  f"{row['seconds']:.0f} s", flush=True)
-    table = []
-    for r in rows:
-        table.append([r["noise_seed"], r["fit"], _common.fmt(r.get("rel_error"), "+.4f"),
-                      _common.fmt(r.get("z"), "+.2f"), _common.fmt(r.get("contact_point_error_um"), "+.4f"), r["misfit"],
-                      _common.fmt(r["chi2_reduced"], ".2f"), _common.fmt(r["seconds"], ".0f")])
+                  f"chi2_red {row['chi2_reduced']:.2f}  {row['seconds']:.0f} s", flush=True)
+        _common.write_json(args.out, "lawn_recovery", args, {"truth": TRUTH, "lawn": lawn, "rows": rows,
+                                                             "summary": _summary(rows, seeds.index(seed) + 1)})
+    table = [[r["noise_seed"], r["fit"], _common.fmt(r.get("rel_error"), "+.4f"), _common.fmt(r.get("z"), "+.2f"),
+              _common.fmt(r.get("contact_point_error_um"), "+.4f"), r["misfit"], _common.fmt(r["chi2_reduced"], ".2f"),
+              _common.fmt(r["seconds"], ".0f")] for r in rows]
     _common.print_table(["noise seed", "fit", "rel. error", "z", "contact pt err (µm)", "misfit", "chi2_red", "s"],
-                        table,
-                        title=f"lawn recovery, {outcrops} outcrops (seeds 2…) fitting a lawn of seeds 102…, 2 % noise")
-    summary = {}
-    for target, limit in (("EI", 0.05), ("density", 0.10)):
-        sel = [r for r in rows if r["fit"] == target]
-        summary[target] = {"within_limit": sum(abs(r["rel_error"]) < limit for r in sel), "limit": limit,
-                           "within_2se": sum(abs(r["z"]) <= 2 for r in sel), "misfit": sum(r["misfit"] for r in sel),
-                           "n": len(sel)}
-    summary["column"] = {"misfit": sum(r["misfit"] for r in rows if r["fit"] == "column"), "n": len(seeds)}
-    for name, s in summary.items():
+                        table, title=f"lawn recovery: {N_MODEL} model realisations fitting {N_TRUTH} other "
+                                     "outcrops under the probe, 2 % noise")
+    for name, s in _summary(rows, len(seeds)).items():
         print(f"{name}: " + ", ".join(f"{k} {v}" for k, v in s.items()))
-    _common.write_json(args.out, "lawn_recovery", args, {"truth": TRUTH, "lawn": lawn, "rows": rows, "summary": summary})
     return 0
 
 

@@ -120,7 +120,10 @@ class FitResult(eqx.Module):
         systematically: ..." gives the evidence) is independent of ``converged``.
     comparison : a :class:`socbjax.ModelComparison` when ``fit(..., compare=...)``, else None.
     realisation_errors : for models averaging random realisations (:class:`socbjax.LawnModel`):
-        each free parameter's standard error from the finite sample of realisations alone.
+        each free parameter's standard error from random outcrops alone (the model's finite
+        sample of realisations and the experiment's own outcrops under the probe:
+        :meth:`socbjax.LawnModel.realisation_covariance`); combine it with
+        ``standard_errors`` in quadrature for the total.
     """
 
     model: str

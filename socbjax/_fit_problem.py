@@ -376,13 +376,27 @@ def diagnose(problem: FitProblem, z, message: str | None, where: str) -> FitRang
 
 
 def scaled_start(problem: FitProblem, r: np.ndarray, initial: dict, residuals: Callable | None = None) -> tuple:
-    """(problem, note): when every segment's EI comes from free parameters without a starting
-    value (and neither ``force_scale`` nor ``perturbation`` is set), scale them to the data's
-    force level: at fixed geometry the force is proportional to EI, so one least-squares
-    factor (from the first evaluation) puts the start at the best EI for the start's shape."""
+    """(problem, note): scale the start to the data's force level with one least-squares
+    factor (from the first evaluation), exact because at fixed geometry the force is
+    proportional to EI and to a force scale (``force_scale``, a lawn's ``density``):
+
+    * when every segment's EI comes from free parameters without a starting value (and
+      neither ``force_scale`` nor ``perturbation`` is set), those EI values;
+    * else a free force scale without a starting value (the EI values fixed or set).
+
+    Without it a fit that starts a factor off the data's force level (e.g. a lawn's density
+    at its default) moves the contact point first, where the force jumps at contact and the
+    Gauss–Newton model is poor, and Levenberg–Marquardt stalls at a large damping."""
     free, fixed, table = problem.free, problem.fixed, problem.table
     sources = stiffness_sources(problem.model, free, fixed)
-    if (not sources <= set(free) or sources & set(initial) or {"force_scale", "perturbation"} & set((*free, *fixed))):
+    scales = [n for n in ("force_scale", *getattr(problem.model, "force_scales", ()))
+              if n in free and n not in initial]
+    settled = {"force_scale", "perturbation"} & set((*free, *fixed))
+    if sources <= set(free) and not sources & set(initial) and not settled:
+        scaled = sources
+    elif len(scales) == 1:
+        scaled = set(scales)
+    else:
         return problem, None
     values = {k: float(v) for k, v in problem.to_values(problem.z0).items()}
     w = 1.0 / problem.sigma
@@ -394,12 +408,12 @@ def scaled_start(problem: FitProblem, r: np.ndarray, initial: dict, residuals: C
         return problem, None
     z = np.asarray(problem.z0, float).copy()
     for i, name in enumerate(free):
-        if name in sources:
+        if name in scaled:
             try:
                 z[i] = float(table[name].to_z(table[name].check(values[name] * factor, "scaled start")))
             except ValueError:
                 return problem, None
-    scaled = dataclasses.replace(problem, z0=jnp.asarray(z))
-    check_start(scaled, scaled.z0, residuals, "at the start scaled to the data's force level ")
-    shown = ", ".join(f"{n} = {values[n] * factor:.4g}" for n in free if n in sources)
-    return scaled, f"start {shown} {table['EI'].unit}: the default scaled ×{factor:.4g} to the data's force level"
+    start = dataclasses.replace(problem, z0=jnp.asarray(z))
+    check_start(start, start.z0, residuals, "at the start scaled to the data's force level ")
+    shown = ", ".join(f"{n} = {values[n] * factor:.4g} {table[n].unit}" for n in free if n in scaled)
+    return start, f"start {shown}: the default scaled ×{factor:.4g} to the data's force level"

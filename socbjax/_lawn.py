@@ -21,7 +21,10 @@ the tree (a last growth of more pieces than a generation's; not with the default
 growth in 0.5 µm segments) is solved in a batch of its own topology.  The same seeds are
 used at every evaluation — common random numbers across the iterations of a fit — and
 :meth:`LawnModel.realisation_spread` gives the spread of the
-realisations, the share of the uncertainty that comes from the finite sample.
+realisations; a fit's ``realisation_errors`` propagate it, for the model's finite sample
+and for the experiment's own ρA outcrops under the probe
+(:meth:`LawnModel.realisation_covariance`).  Without a contact model, ``screen=u`` keeps
+only realisations that can be followed to the travel u without crossing a surface.
 
 Identifiability: at fixed geometry the force scales exactly with EI and with ρ, so one curve
 determines only ρ · EI; a fit refuses both free (fix one at an independently measured value).
@@ -33,6 +36,7 @@ Units: µm, pN, pN·µm²; stress in Pa (pN/µm² = Pa); strain = compression / 
 
 from __future__ import annotations
 
+import functools
 import math
 
 import jax
@@ -65,6 +69,14 @@ class LawnModel(FitModel):
     generations, growth, segment_length, branch_angle, dim : of each outcrop
         (:func:`socbjax.dendritic_outcrop`; branch angle in degrees fixes the topology).
     n_outcrops : realisations averaged (seeds ``seed`` … ``seed + n_outcrops − 1``).
+    seeds : explicit outcrop seeds (a sequence of distinct integers ≥ 0) instead of
+        ``seed`` and ``n_outcrops``.
+    screen : None, or a probe travel (µm, below ``film_height``): keep only realisations
+        that can be followed to it at the built loads — whose nodes do not cross the
+        substrate or the probe plane before (no contact model yet: such a path is not
+        physical and a fit could not evaluate it). Seeds are drawn ``seed``, ``seed + 1``, …
+        until ``n_outcrops`` pass (with ``seeds``: those of them that pass); the seeds
+        refused are ``screened_out``. The lawn is then that of the screened population.
 
     Fit parameters: ``EI`` (pN·µm²), ``density`` (µm⁻²), ``perturbation`` (pN), and
     ``branch_angle`` (deg, fixed only: it is the topology's angle), plus the curve's own
@@ -81,22 +93,33 @@ class LawnModel(FitModel):
 
     def __init__(self, probe_radius: float | None = None, probe_area: float | None = None, *,
                  film_height: float = 3.0, generations: int = 4, n_outcrops: int = 8, seed: int = 0,
-                 branch_angle: float = 70.0, growth: float = 1.0, segment_length: float = 0.5, dim: int = 3):
+                 branch_angle: float = 70.0, growth: float = 1.0, segment_length: float = 0.5, dim: int = 3,
+                 seeds=None, screen: float | None = None):
         if probe_radius is not None and probe_area is not None:
             raise ValueError("give probe_radius (sphere, µm) or probe_area (flat disc, µm²), not both")
         self.probe_radius = None if probe_radius is None else check_real("probe_radius", probe_radius, "µm", low=0.0, traced_ok=False)
         self.probe_area = None if probe_radius is not None else check_real(
             "probe_area", 20.0 if probe_area is None else probe_area, "µm²", low=0.0, traced_ok=False)
         self.film_height = check_real("film_height", film_height, "µm", low=0.0, traced_ok=False)
-        self.n_outcrops = check_int("n_outcrops", n_outcrops, minimum=1, maximum=4096)
-        self.seed = check_int("seed", seed, minimum=0)
         self.branch_angle = float(branch_angle)
-        self.members = [dendritic_outcrop(generations=generations, gap=self.film_height, growth=growth,
-                                          segment_length=segment_length, branch_angle=branch_angle, EI=_ACTIN_EI,
-                                          seed=self.seed + k, dim=dim) for k in range(self.n_outcrops)]
+        self.generations = int(generations)
+
+        def grow(k):
+            return dendritic_outcrop(generations=generations, gap=self.film_height, growth=growth,
+                                     segment_length=segment_length, branch_angle=branch_angle, EI=_ACTIN_EI, seed=k,
+                                     dim=dim)
+
+        self.seeds, self.screened_out, self.screen = _seeds(seeds, seed, n_outcrops), (), None
+        if screen is not None:
+            self.screen = check_real("screen", screen, "µm", low=0.0, traced_ok=False)
+            if not self.screen < self.film_height:
+                raise ValueError(f"screen must be a probe travel below film_height={self.film_height:g} µm, got "
+                                 f"{self.screen:g}")
+            self.seeds, self.screened_out = _screened(grow, self.seeds, seeds is None, self.screen, self.generations)
+        self.n_outcrops, self.seed = len(self.seeds), self.seeds[0]
+        self.members = [grow(k) for k in self.seeds]
         self.base = self.members[0]
         self.groups = {}  # EI groups of FitModel (none: one EI for all filaments)
-        self.generations = int(generations)
         self.topology_groups, self.padded, self._stacked = _batches(self.members, self.generations)
         self.parameters = {
             "EI": Parameter("EI", _ACTIN_EI, "pN·µm²", lower=0.0, doc="bending stiffness of all filaments"),
@@ -124,6 +147,9 @@ class LawnModel(FitModel):
         lines = [(f"lawn: {self.probe}, film {self.film_height:g} µm, {self.n_outcrops} outcrop realisation(s) "
                   f"({min(sizes)}–{max(sizes)} segments; {len(self.padded)} padded to one topology, "
                   f"{n_topo} compiled program{'' if n_topo == 1 else 's'})")]
+        if self.screen is not None:
+            lines.append(f"  screened: realisations followed to {self.screen:g} µm without crossing a surface "
+                         f"({len(self.screened_out)} seed(s) refused)")
         for p in self.parameters.values():
             lines.append(f"  {p.name:<14s} default {p.value:<10.4g} {p.unit:<8s} bounds ({p.lower}, {p.upper})  {p.doc}")
         return "\n".join(lines)
@@ -246,18 +272,35 @@ class LawnModel(FitModel):
         forces, _ = self.lawn_forces(physical, u, reach=reach, retract=retract, method=method, settings=settings)
         return np.asarray(forces)
 
+    def outcrops_under_probe(self, values: dict, compression) -> float:
+        """How many outcrops the experiment's probe presses at ``values`` (its ``density``,
+        µm⁻²): ρ A for the flat disc; ρ 2π R δ_max for the sphere, those within the contact
+        area at the deepest probe travel δ_max (µm; ``compression`` with the contact terms of
+        ``values`` applied)."""
+        density = float(values.get("density", self.parameters["density"].value))
+        if self.probe_radius is None:
+            return density * self.probe_area
+        deepest = float(np.max(np.asarray(compression, float) + float(contact_shift(values))))
+        return density * 2 * math.pi * self.probe_radius * max(deepest, 0.0)
+
     def realisation_covariance(self, values: dict, compression, *, reach: float, retract=None, method="displacement",
-                               settings=None) -> np.ndarray:
+                               settings=None, experiment: bool = True) -> np.ndarray:
         """[m, m] covariance (pN²) of the model force at the data compressions (µm; contact
-        terms of ``values`` applied) that comes from averaging ``n_outcrops`` random
-        realisations: the sample covariance of :meth:`lawn_forces` over them / n_outcrops
-        (zeros for a single realisation)."""
+        terms of ``values`` applied) that comes from random outcrops: S (1/n_outcrops + 1/n_p),
+        S the sample covariance of :meth:`lawn_forces` over the realisations.  1/n_outcrops:
+        the model averages a finite sample of realisations; 1/n_p (``experiment``): the
+        experiment's curve is itself the force of the n_p random outcrops under its probe
+        (:meth:`outcrops_under_probe`; for the sphere an approximation, n_p at the deepest
+        travel), which differ from the population's mean just as the model's do.  Zeros for a
+        single realisation (no spread to estimate)."""
         c = np.asarray(compression, float)
         forces = self._realisations(values, c, reach=reach, retract=retract, method=method, settings=settings)
         forces = forces * float(values.get("force_scale", 1.0))
         if self.n_outcrops < 2:
             return np.zeros((c.size, c.size))
-        return np.cov(forces, rowvar=False, ddof=1).reshape(c.size, c.size) / self.n_outcrops
+        n_p = self.outcrops_under_probe(values, c) if experiment else math.inf
+        share = 1.0 / self.n_outcrops + (1.0 / n_p if n_p > 0 else 0.0)
+        return np.cov(forces, rowvar=False, ddof=1).reshape(c.size, c.size) * share
 
     def realisation_spread(self, values: dict, compression, *, reach: float | None = None):
         """(mean [m], standard error [m]) of the lawn force (pN) over the realisations at the
@@ -272,9 +315,10 @@ class LawnModel(FitModel):
         return forces.mean(axis=0), se
 
     def realisation_errors(self, problem, values: dict, J, z) -> dict:
-        """Standard error of each free parameter (in its unit) that comes from the finite
-        sample of realisations, by the delta method: with the residual Jacobian J [m, p] in
-        the unconstrained variables z at the optimum, A = JᵀJ, Σ_r = Σ_F/σσᵀ (Σ_F from
+        """Standard error of each free parameter (in its unit) that comes from random
+        outcrops — the model's finite sample and the experiment's own outcrops under the
+        probe (:meth:`realisation_covariance`) — by the delta method: with the residual
+        Jacobian J [m, p] in the unconstrained variables z at the optimum, A = JᵀJ, Σ_r = Σ_F/σσᵀ (Σ_F from
         :meth:`realisation_covariance`), Cov_z = A⁻¹ Jᵀ Σ_r J A⁻¹, mapped by D = dθ/dz."""
         table = problem.table
         D = np.array([float(jax.grad(table[n].to_value)(float(z[i]))) for i, n in enumerate(problem.free)])
@@ -285,6 +329,61 @@ class LawnModel(FitModel):
         cov_z = A_inv @ J.T @ cov_r @ J @ A_inv
         se = np.abs(D) * np.sqrt(np.abs(np.diag(cov_z)))
         return dict(zip(problem.free, map(float, se)))
+
+
+def _seeds(seeds, seed, n_outcrops) -> tuple:
+    """The outcrop seeds: ``seeds`` checked (distinct integers ≥ 0), else ``seed`` …
+    ``seed + n_outcrops − 1``."""
+    if seeds is None:
+        n = check_int("n_outcrops", n_outcrops, minimum=1, maximum=4096)
+        first = check_int("seed", seed, minimum=0)
+        return tuple(range(first, first + n))
+    if isinstance(seeds, (str, bytes)) or not hasattr(seeds, "__len__"):
+        raise TypeError(f"seeds must be a sequence of integers, got {type(seeds).__name__}")
+    out = tuple(check_int("seeds", k, minimum=0) for k in seeds)
+    if not 1 <= len(out) <= 4096 or len(set(out)) != len(out):
+        raise ValueError(f"seeds must be 1 to 4096 distinct integers ≥ 0 (equal seeds are equal outcrops), "
+                         f"got {list(out)}")
+    return out
+
+
+_SCREEN_ROUNDS = 16
+
+
+def _screened(grow, seeds: tuple, draw: bool, screen: float, generations: int) -> tuple:
+    """(seeds that pass, seeds refused): the realisations ``grow(k)`` that can be followed to
+    ``screen`` µm (:func:`_followed`); ``draw``: candidates in rounds of len(seeds) consecutive
+    seeds until that many pass (one compiled program for every round), else ``seeds`` once."""
+    want, passed, refused = len(seeds), [], []
+    candidates = seeds
+    for _ in range(_SCREEN_ROUNDS if draw else 1):
+        groups, _, stacked = _batches([grow(k) for k in candidates], generations)
+        ok = np.zeros(len(candidates), bool)
+        for group, nets in zip(groups, stacked):
+            ok[list(group)] = np.asarray(_followed(nets, screen))
+        passed += [k for k, good in zip(candidates, ok) if good]
+        refused += [k for k, good in zip(candidates, ok) if not good]
+        if len(passed) >= want or not draw:
+            break
+        candidates = tuple(range(candidates[-1] + 1, candidates[-1] + 1 + want))
+    if not passed or (draw and len(passed) < want):
+        raise ValueError(f"screen={screen:g} µm: only {len(passed)} of {len(passed) + len(refused)} realisations can "
+                         f"be followed that far (the others' nodes cross the substrate or the probe plane: no contact "
+                         f"model yet); screen to a smaller travel, or give fewer n_outcrops")
+    kept = tuple(passed[:want] if draw else passed)
+    return kept, tuple(k for k in refused if not draw or k < kept[-1])
+
+
+@functools.partial(jax.jit, static_argnames=("reach",))
+def _followed(stacked, reach: float):
+    """[n] bool: each of a batch of networks followed to ``reach`` µm without failing or
+    crossing the substrate or the probe plane."""
+
+    def one(net):
+        r = compress(net, reach, at=jnp.asarray([reach]), throw=False)
+        return jnp.all(r.converged) & (r.result != RESULTS.surface_crossed)
+
+    return jax.vmap(one)(stacked)
 
 
 def _batches(members, generations: int):

@@ -197,3 +197,19 @@ def test_surface_crossing_inside_the_data_is_diagnosed():
     assert err.value.cause == "surface" and 0.4 < err.value.limit < 0.46
     assert "cross the surface" in str(err.value) and "arclength" not in str(err.value)
     assert "model_options={'mother_length': 2}" in str(err.value)
+
+
+def test_free_force_scale_starts_at_its_least_squares_value():
+    """With EI fixed 50 × too soft and force_scale free, the start is scaled to the data's
+    force level: the force is exactly proportional to force_scale, so the least-squares value
+    is Σ F f / Σ f² (f the model at the fixed EI), reached already by the start — one
+    Levenberg–Marquardt iteration from the default 1 (log-transformed) could not get there."""
+    model = ColumnModel(4, supports=("pinned", "pinned"), dim=2)
+    c = np.linspace(0.02, 0.3, 12)
+    F = _synthetic(model, {"EI": 0.071}, c, seed=3)
+    f0 = np.asarray(sj.compress(model.network({"EI": 0.071 / 50}), 0.3, at=c).force)
+    best = float(F @ f0) / float(f0 @ f0)
+    result = sj.fit((c, F), model, free="force_scale", fixed={"EI": 0.071 / 50},
+                    settings=sj.FitSettings(max_iterations=1))
+    assert best == pytest.approx(50.0, rel=0.05)
+    assert result.values["force_scale"] == pytest.approx(best, rel=1e-6)

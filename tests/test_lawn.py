@@ -117,6 +117,54 @@ def test_plot_lawn_shows_realisations_mean_and_stress(flat, realisations):
         sj.plot_lawn(flat, None, [0.0, 5.0])
 
 
+def test_realisation_covariance_counts_model_and_experiment_samples(flat, realisations):
+    """The lawn force's covariance from random outcrops: the sample covariance S of the
+    lawn force as if every outcrop were realisation k (ρ A F_k, F_k compressed on its own)
+    times 1/n_outcrops (the model's sample) + 1/(ρ A) (the experiment's outcrops)."""
+    values = {"EI": 0.071, "density": 1.5}
+    S = np.cov(1.5 * 12.0 * realisations, rowvar=False, ddof=1)
+    assert np.max(np.abs(S)) > 0  # the two realisations differ
+    assert flat.outcrops_under_probe(values, C) == pytest.approx(18.0)
+    both = flat.realisation_covariance(values, C, reach=REACH)
+    np.testing.assert_allclose(both, S * (1 / 2 + 1 / 18), rtol=1e-8, atol=1e-12 * np.max(np.abs(S)))
+    model_only = flat.realisation_covariance(values, C, reach=REACH, experiment=False)
+    np.testing.assert_allclose(model_only, S / 2, rtol=1e-8, atol=1e-12 * np.max(np.abs(S)))
+
+
+def test_explicit_seeds_choose_the_realisations(flat, realisations):
+    swapped = sj.LawnModel(probe_area=12.0, seeds=(1, 0), **{k: v for k, v in LAWN.items() if k != "n_outcrops"})
+    assert swapped.seeds == (1, 0) and swapped.n_outcrops == 2
+    forces, ok = swapped.outcrop_forces({"EI": 0.071}, C, reach=REACH)
+    np.testing.assert_allclose(np.asarray(forces), realisations[::-1], rtol=1e-9, atol=1e-12)
+    assert bool(np.all(np.asarray(ok)))
+    with pytest.raises(ValueError, match="distinct"):
+        sj.LawnModel(seeds=(3, 3), generations=2)
+    with pytest.raises(TypeError, match="seeds must be a sequence"):
+        sj.LawnModel(seeds=5, generations=2)
+
+
+def test_screen_keeps_realisations_that_can_be_followed(flat):
+    """Both realisations of the fixture are followed to REACH on their own (the
+    ``realisations`` fixture asserts it), so a screen at REACH keeps them and refuses none."""
+    screened = sj.LawnModel(probe_area=12.0, screen=REACH, **LAWN)
+    assert screened.seeds == flat.seeds and screened.screened_out == ()
+    assert "screened" in screened.describe()
+    with pytest.raises(ValueError, match="screen must be a probe travel below film_height"):
+        sj.LawnModel(screen=3.0, film_height=3.0, generations=2)
+
+
+@pytest.mark.slow
+def test_screen_refuses_realisations_that_cross_the_surface():
+    """Planar outcrops of 4 generations at a 3 µm film: seeds 0 and 1 cross the surface
+    before 0.3 µm when compressed on their own, seeds 2 and 3 do not; the screen draws on
+    until two pass."""
+    lawn = sj.LawnModel(generations=4, film_height=3.0, dim=2, n_outcrops=2, screen=0.3)
+    assert lawn.seeds == (2, 3) and lawn.screened_out == (0, 1)
+    for seed in (0, 1, 2, 3):
+        r = sj.compress(sj.dendritic_outcrop(generations=4, gap=3.0, dim=2, seed=seed), 0.3, throw=False)
+        assert (r.result == sj.RESULTS.surface_crossed) == (seed < 2)
+
+
 def test_bad_options_are_named():
     with pytest.raises(ValueError, match="probe_radius .* or probe_area"):
         sj.LawnModel(probe_radius=2.0, probe_area=3.0)
