@@ -119,11 +119,11 @@ def main(argv=None) -> int:
     for seed in seeds:
         noisy = clean + 0.02 * clean.max() * np.random.default_rng(seed).standard_normal(c.size)
         curve = (c, noisy)
-        fits = [lambda: _fit(curve, model, "EI", {"density": TRUTH["density"]}), lambda: _column(curve)]
+        fits = [("EI", {"density": TRUTH["density"]}), ("column", None)]
         if seed == seeds[0] or DENSITY_EVERY_SEED:
-            fits.insert(1, lambda: _fit(curve, model, "density", {"EI": TRUTH["EI"]}))
-        for run in fits:
-            row = run()
+            fits.insert(1, ("density", {"EI": TRUTH["EI"]}))
+        for target, fixed in fits:
+            row = _column(curve) if target == "column" else _fit(curve, model, target, fixed)
             rows.append({"noise_seed": seed, **row})
             rel, z = row.get("rel_error", float("nan")), row.get("z", float("nan"))
             print(f"  seed {seed} {row['fit']:<8s} {rel:+.4f}  z {z:+.2f}  misfit {row['misfit']}  "

@@ -391,7 +391,7 @@ def scaled_start(problem: FitProblem, r: np.ndarray, initial: dict, residuals: C
     sources = stiffness_sources(problem.model, free, fixed)
     scales = [n for n in ("force_scale", *getattr(problem.model, "force_scales", ()))
               if n in free and n not in initial]
-    settled = {"force_scale", "perturbation"} & set((*free, *fixed))
+    settled = {"force_scale", "perturbation"} & {*free, *fixed}
     if sources <= set(free) and not sources & set(initial) and not settled:
         scaled = sources
     elif len(scales) == 1:
