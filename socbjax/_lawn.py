@@ -110,14 +110,16 @@ class LawnModel(FitModel):
                                      dim=dim)
 
         self.seeds, self.screened_out, self.screen = _seeds(seeds, seed, n_outcrops), (), None
+        built = {}
         if screen is not None:
             self.screen = check_real("screen", screen, "µm", low=0.0, traced_ok=False)
             if not self.screen < self.film_height:
                 raise ValueError(f"screen must be a probe travel below film_height={self.film_height:g} µm, got "
                                  f"{self.screen:g}")
-            self.seeds, self.screened_out = _screened(grow, self.seeds, seeds is None, self.screen, self.generations)
+            built = _screened(grow, self.seeds, seeds is None, self.screen, self.generations)
+            self.seeds, self.screened_out = tuple(built["passed"]), built.pop("refused")
         self.n_outcrops, self.seed = len(self.seeds), self.seeds[0]
-        self.members = [grow(k) for k in self.seeds]
+        self.members = [built["passed"][k] if k in built.get("passed", {}) else grow(k) for k in self.seeds]
         self.base = self.members[0]
         self.groups = {}  # EI groups of FitModel (none: one EI for all filaments)
         self.topology_groups, self.padded, self._stacked = _batches(self.members, self.generations)
@@ -219,7 +221,7 @@ class LawnModel(FitModel):
                 f = r.force[:u.shape[0]]
                 if retract is not None:
                     f = jnp.where(np.asarray(retract, bool), r.force[u.shape[0]:][::-1], f)
-                return f, jnp.all(r.converged) & (r.result != RESULTS.surface_crossed)
+                return f, _followed_to_the_end(r)
 
             f, ok = jax.vmap(one)(nets)
             forces.append(f)
@@ -350,18 +352,20 @@ def _seeds(seeds, seed, n_outcrops) -> tuple:
 _SCREEN_ROUNDS = 16
 
 
-def _screened(grow, seeds: tuple, draw: bool, screen: float, generations: int) -> tuple:
-    """(seeds that pass, seeds refused): the realisations ``grow(k)`` that can be followed to
-    ``screen`` µm (:func:`_followed`); ``draw``: candidates in rounds of len(seeds) consecutive
-    seeds until that many pass (one compiled program for every round), else ``seeds`` once."""
-    want, passed, refused = len(seeds), [], []
+def _screened(grow, seeds: tuple, draw: bool, screen: float, generations: int) -> dict:
+    """{"passed": {seed: network}, "refused": seeds}: the realisations ``grow(k)`` that can be
+    followed to ``screen`` µm (:func:`_followed`), built once and kept for the lawn;
+    ``draw``: candidates in rounds of len(seeds) consecutive seeds until that many pass (one
+    compiled program for every round), else ``seeds`` once."""
+    want, passed, refused = len(seeds), {}, []
     candidates = seeds
     for _ in range(_SCREEN_ROUNDS if draw else 1):
-        groups, _, stacked = _batches([grow(k) for k in candidates], generations)
+        members = [grow(k) for k in candidates]
+        groups, _, stacked = _batches(members, generations)
         ok = np.zeros(len(candidates), bool)
         for group, nets in zip(groups, stacked):
             ok[list(group)] = np.asarray(_followed(nets, screen))
-        passed += [k for k, good in zip(candidates, ok) if good]
+        passed.update((k, net) for k, net, good in zip(candidates, members, ok) if good)
         refused += [k for k, good in zip(candidates, ok) if not good]
         if len(passed) >= want or not draw:
             break
@@ -370,8 +374,15 @@ def _screened(grow, seeds: tuple, draw: bool, screen: float, generations: int) -
         raise ValueError(f"screen={screen:g} µm: only {len(passed)} of {len(passed) + len(refused)} realisations can "
                          f"be followed that far (the others' nodes cross the substrate or the probe plane: no contact "
                          f"model yet); screen to a smaller travel, or give fewer n_outcrops")
-    kept = tuple(passed[:want] if draw else passed)
-    return kept, tuple(k for k in refused if not draw or k < kept[-1])
+    kept = list(passed)[:want] if draw else list(passed)
+    return {"passed": {k: passed[k] for k in kept},
+            "refused": tuple(k for k in refused if not draw or k < kept[-1])}
+
+
+def _followed_to_the_end(result) -> jnp.ndarray:
+    """Whether a :func:`socbjax.compress` result reached its travel: converged, and no node
+    crossed the substrate or the probe plane (no contact model: such a path is not physical)."""
+    return jnp.all(result.converged) & (result.result != RESULTS.surface_crossed)
 
 
 @functools.partial(jax.jit, static_argnames=("reach",))
@@ -380,8 +391,7 @@ def _followed(stacked, reach: float):
     crossing the substrate or the probe plane."""
 
     def one(net):
-        r = compress(net, reach, at=jnp.asarray([reach]), throw=False)
-        return jnp.all(r.converged) & (r.result != RESULTS.surface_crossed)
+        return _followed_to_the_end(compress(net, reach, at=jnp.asarray([reach]), throw=False))
 
     return jax.vmap(one)(stacked)
 
