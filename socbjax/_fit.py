@@ -53,6 +53,11 @@ class FitSettings:
 
     optimizer : "lm" (Levenberg–Marquardt, default), "adam" or "lbfgs" (optax).
     max_iterations, tolerance : optimiser limits (relative loss decrease / step size).
+    se_tolerance : Levenberg–Marquardt also stops when an accepted step moved every free
+        parameter by less than this fraction of its standard error (default 0.02, cf. MINUIT's
+        estimated-distance-to-minimum criterion 2e-4 ≈ (0.02 σ)²/2): further steps cannot change
+        the answer measurably, and on a curve whose force jumps at contact (inextensible
+        filaments) they creep along the contact point at a growing damping; 0: off.
     learning_rate : Adam's step size in the unconstrained variables.
     branch : "loading" (approach, default), "unloading" (retract) or "both" (a ForceCurve's
         approach and retract together, one path; ``FitResult.goodness`` then holds the
@@ -69,6 +74,7 @@ class FitSettings:
     optimizer: str = "lm"
     max_iterations: int = 30
     tolerance: float = 1e-8
+    se_tolerance: float = 0.02
     learning_rate: float = 0.05
     branch: str = "loading"
     max_points: int = 80
@@ -85,6 +91,9 @@ class FitSettings:
             value = getattr(self, name)
             if not (math.isfinite(float(value)) and float(value) > 0):
                 raise ValueError(f"FitSettings.{name} must be a positive finite number, got {value!r}")
+        if not (math.isfinite(float(self.se_tolerance)) and float(self.se_tolerance) >= 0):
+            raise ValueError(f"FitSettings.se_tolerance must be a finite fraction >= 0 of a standard error (0: off), "
+                             f"got {self.se_tolerance!r}")
         if self.branch not in BRANCHES:
             raise ValueError(f"FitSettings.branch must be one of {BRANCHES}, got {self.branch!r}")
         if self.method not in ("displacement", "arclength"):
@@ -254,9 +263,22 @@ def _float_values(values: dict) -> dict:
     return {k: float(v) for k, v in values.items()}
 
 
-def _levenberg_marquardt(jac, z, max_iterations, tolerance, report, rejected=lambda iteration, damping: None):
+def _within_standard_errors(J, r, step, fraction: float) -> bool:
+    """Every component of ``step`` (unconstrained variables) is below ``fraction`` of that
+    variable's Gauss–Newton standard error at (J, r): s² = |r|²/(m − p), SE² = s² diag((JᵀJ)⁺)."""
+    if not fraction > 0:
+        return False
+    m, p = J.shape
+    s2 = float(r @ r) / max(m - p, 1)
+    se = np.sqrt(np.abs(s2 * np.diag(np.linalg.pinv(J.T @ J))))
+    return bool(np.all(np.abs(step) <= fraction * se))
+
+
+def _levenberg_marquardt(jac, z, max_iterations, tolerance, report, rejected=lambda iteration, damping: None,
+                         se_tolerance: float = 0.0):
     """Minimise ½|r(z)|²; ``jac(z)`` -> (J [m, p], r [m]).  Returns (z, r, J, history, converged,
-    message, evaluations)."""
+    message, evaluations).  Stops at a gradient, relative loss decrease or step below
+    ``tolerance``, or an accepted step below ``se_tolerance`` standard errors in every variable."""
     J, r = (np.asarray(a) for a in jac(z))
     loss, damping, history, evaluations = 0.5 * float(r @ r), 1e-3, [], 1
     converged, message = False, f"reached max_iterations={max_iterations}"
@@ -287,6 +309,9 @@ def _levenberg_marquardt(jac, z, max_iterations, tolerance, report, rejected=lam
         report(iteration, loss, z)
         if decrease <= tolerance * loss or np.max(np.abs(step)) <= tolerance * (1.0 + float(np.max(np.abs(z)))):
             converged, message = True, "converged (relative loss decrease or step below tolerance)"
+            break
+        if _within_standard_errors(J, r, step, se_tolerance):
+            converged, message = True, f"converged (the last step moved every parameter by < {se_tolerance:g} SE)"
             break
     return z, r, J, history, converged, message, evaluations
 
@@ -365,7 +390,7 @@ def _optimise(problem, settings: FitSettings, jac, report, bar):
     """Run the chosen optimiser: (z, history, converged, message, evaluations)."""
     if settings.optimizer == "lm":
         z, _, _, history, converged, message, evaluations = _levenberg_marquardt(
-            jac, problem.z0, settings.max_iterations, settings.tolerance, report, bar.rejected)
+            jac, problem.z0, settings.max_iterations, settings.tolerance, report, bar.rejected, settings.se_tolerance)
         return z, history, converged, message, evaluations
     bar.note(f"compiling the loss's gradient ({settings.optimizer})")
     loss = lambda z: 0.5 * jnp.sum(problem.residuals(z) ** 2)

@@ -213,3 +213,21 @@ def test_free_force_scale_starts_at_its_least_squares_value():
                     settings=sj.FitSettings(max_iterations=1))
     assert best == pytest.approx(50.0, rel=0.05)
     assert result.values["force_scale"] == pytest.approx(best, rel=1e-6)
+
+
+def test_step_below_a_fraction_of_the_standard_errors_stops_at_the_tight_optimum():
+    """FitSettings.se_tolerance: the default fit stops when a step moves every parameter by
+    < 2 % of its standard error; its values agree with a fit run to a 1e-12 relative loss
+    change without that criterion to within 5 % of a standard error."""
+    model = ColumnModel(5, supports=("pinned", "pinned"), dim=2)
+    c = np.linspace(0.02, 0.4, 20)
+    F = _synthetic(model, {"EI": 0.071, "perturbation": 0.1}, c, seed=3, noise=0.02, displacement=0.4)
+    kwargs = dict(free=("EI", "baseline"), initial={"EI": 0.05}, fixed={"perturbation": 0.1})
+    loose = sj.fit((c, F), model, **kwargs)
+    tight = sj.fit((c, F), model, **kwargs, settings=sj.FitSettings(se_tolerance=0.0, tolerance=1e-12))
+    assert loose.converged and tight.converged, (loose.summary(), tight.summary())
+    for name in ("EI", "baseline"):
+        assert abs(loose.values[name] - tight.values[name]) <= 0.05 * tight.standard_errors[name]
+    assert loose.n_evaluations <= tight.n_evaluations
+    with pytest.raises(ValueError, match="se_tolerance"):
+        sj.FitSettings(se_tolerance=-1.0)
