@@ -263,14 +263,18 @@ def _float_values(values: dict) -> dict:
     return {k: float(v) for k, v in values.items()}
 
 
+def _residual_variance(J, r) -> float:
+    """s² = |r|²/(m − p): the residual variance that scales the Gauss–Newton covariance."""
+    m, p = J.shape
+    return float(r @ r) / max(m - p, 1)
+
+
 def _within_standard_errors(J, r, step, fraction: float) -> bool:
     """Every component of ``step`` (unconstrained variables) is below ``fraction`` of that
     variable's Gauss–Newton standard error at (J, r): s² = |r|²/(m − p), SE² = s² diag((JᵀJ)⁺)."""
     if not fraction > 0:
         return False
-    m, p = J.shape
-    s2 = float(r @ r) / max(m - p, 1)
-    se = np.sqrt(np.abs(s2 * np.diag(np.linalg.pinv(J.T @ J))))
+    se = np.sqrt(np.abs(_residual_variance(J, r) * np.diag(np.linalg.pinv(J.T @ J))))
     return bool(np.all(np.abs(step) <= fraction * se))
 
 
@@ -354,8 +358,8 @@ def _with_value(fn):
 
 def _uncertainties(J, r, z, table, free):
     """Gauss–Newton covariance of the values, correlation, identifiability and warnings."""
-    m, p = J.shape
-    s2 = float(r @ r) / max(m - p, 1)
+    p = J.shape[1]
+    s2 = _residual_variance(J, r)
     A = J.T @ J
     warnings = []
     for i, name in enumerate(free):
