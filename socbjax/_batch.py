@@ -29,7 +29,6 @@ different forces at the same EI.
 
 from __future__ import annotations
 
-import csv
 import dataclasses
 import json
 import math
@@ -49,6 +48,7 @@ from ._curve_inputs import (
     read_curve,
     sha256,
 )
+from ._batch_result import BatchResult, finite_json
 from ._fit_model import contact_shift
 
 __all__ = ["BatchResult", "fit_batch", "compare_batch", "collect_curve_files", "read_curve", "curve_from_result",
@@ -125,135 +125,6 @@ def _error_text(err: BaseException) -> str:
     text = _one_line(err)
     user = isinstance(err, (ValueError, TypeError, OSError, ImportError))
     return text if user or type(err).__name__ == "ConvergenceError" else f"{type(err).__name__}: {text}"
-
-
-# ----------------------------------------------------------------------------- the result
-@dataclasses.dataclass
-class BatchResult:
-    """Outcome of :func:`fit_batch`.
-
-    rows : one dict per curve, in the batch's order (file name, path, curve index); keys
-        :attr:`columns`.  Failed curves have ``status = "failed"``, the error in ``message``
-        and NaN values.
-    columns : the column order (``file``, ``sha256``, ``curve_index``, ``model``, ``status``,
-        per free parameter P ``P`` and ``P_se``, then contact point, fit range, points,
-        noise, χ²_red, misfit, R², rms, converged, message, warnings, figure).
-    units : column -> unit.
-    results : the :class:`socbjax.FitResult` per row (None for a failed curve); not written.
-    settings : JSON-able record of the model, options and fit settings.
-    """
-
-    rows: list
-    columns: list
-    units: dict
-    results: list = dataclasses.field(repr=False, default_factory=list)
-    settings: dict = dataclasses.field(default_factory=dict)
-
-    def __len__(self) -> int:
-        return len(self.rows)
-
-    @property
-    def n_failed(self) -> int:
-        return sum(r["status"] == "failed" for r in self.rows)
-
-    @property
-    def n_converged(self) -> int:
-        return sum(r["status"] == "converged" for r in self.rows)
-
-    @property
-    def exit_status(self) -> int:
-        """0 when at least one curve was fitted (converged or not), else 1 (every curve failed)."""
-        return 0 if self.n_failed < len(self.rows) else 1
-
-    def to_dict(self) -> dict:
-        from ._version import __version__
-
-        return _finite({"format": "socbjax.fit_batch", "format_version": 1, "socbjax_version": __version__,
-                        "settings": self.settings, "columns": list(self.columns), "units": dict(self.units),
-                        "n_curves": len(self.rows), "n_converged": self.n_converged, "n_failed": self.n_failed,
-                        "rows": [dict(r) for r in self.rows]})
-
-    def to_json(self, path) -> Path:
-        """Write :meth:`to_dict` as strict JSON (NaN as null), atomically."""
-        from ._io import atomic_path
-
-        text = json.dumps(self.to_dict(), indent=2, allow_nan=False, ensure_ascii=False) + "\n"
-        return atomic_path(Path(path).expanduser(), lambda tmp: tmp.write_text(text, encoding="utf-8"))
-
-    def to_csv(self, path) -> Path:
-        """Write the rows as CSV (header = :attr:`columns`; NaN as ``nan``, missing as empty),
-        atomically: a failing write leaves a previous file at ``path`` untouched."""
-        from ._io import atomic_path
-
-        return atomic_path(Path(path).expanduser(), lambda tmp: _write_csv(tmp, self.columns, self.rows))
-
-    def table(self) -> str:
-        """A short text table: file, status, the fitted values ± SE, χ²_red."""
-        free = self.settings.get("free", [])
-        lines = []
-        for r in self.rows:
-            values = ", ".join(f"{n} = {_fmt(r.get(n))} ± {_fmt(r.get(n + '_se'))}" for n in free)
-            tail = r["message"] if r["status"] == "failed" else f"{values}, χ²_red {_fmt(r['chi2_reduced'])}"
-            lines.append(f"{_label(r)}: {r['status']}: {tail}")
-        return "\n".join(lines)
-
-    def summary_figure(self):
-        """Histograms of every fitted parameter across the fitted curves (median marked; EI on
-        a log axis with the literature EI of actin) and χ²_red per curve."""
-        from ._fit_figure import plot_batch_summary
-
-        return plot_batch_summary(self)
-
-    def save_summary_figure(self, path, *, dpi: int = 150) -> Path:
-        from ._io import atomic_path
-
-        fig = self.summary_figure()
-        return atomic_path(Path(path).expanduser(),
-                           lambda tmp: fig.savefig(tmp, format="png", dpi=dpi, bbox_inches="tight"))
-
-
-def _label(row: dict) -> str:
-    name = Path(row["file"]).name
-    return f"{name} #{row['curve_index']}" if row.get("curve_index") else name
-
-
-def _fmt(value) -> str:
-    if value is None:
-        return "n/a"
-    value = float(value)
-    return "n/a" if not math.isfinite(value) else f"{value:.4g}"
-
-
-def _finite(value):
-    if isinstance(value, dict):
-        return {k: _finite(v) for k, v in value.items()}
-    if isinstance(value, (list, tuple)):
-        return [_finite(v) for v in value]
-    if isinstance(value, (float, np.floating)):
-        return float(value) if math.isfinite(value) else None
-    if isinstance(value, np.integer):
-        return int(value)
-    if isinstance(value, np.bool_):
-        return bool(value)
-    return value
-
-
-def _csv_cell(value) -> str:
-    if value is None:
-        return ""
-    if isinstance(value, (bool, np.bool_)):
-        return "True" if value else "False"
-    if isinstance(value, (float, np.floating)):
-        return repr(float(value)) if math.isfinite(value) else "nan"
-    return str(value)
-
-
-def _write_csv(tmp: Path, columns: Sequence[str], rows: Sequence[dict]) -> None:
-    with open(tmp, "w", encoding="utf-8", newline="") as fh:
-        writer = csv.writer(fh, lineterminator="\n")
-        writer.writerow(columns)
-        for row in rows:
-            writer.writerow([_csv_cell(row.get(c)) for c in columns])
 
 
 # ----------------------------------------------------------------------------- the batch
@@ -463,7 +334,7 @@ def _settings_record(model, options, free, fit_kwargs, settings, segment, spring
             return value
         return repr(value)
 
-    return _finite({"model": model.name, "dim": model_dim(model), "model_options": plain(dict(options)),
+    return finite_json({"model": model.name, "dim": model_dim(model), "model_options": plain(dict(options)),
                     "free": list(free), "fixed": plain(dict(fit_kwargs.get("fixed") or {})),
                     "initial": plain(dict(fit_kwargs.get("initial") or {})),
                     "bounds": plain(dict(fit_kwargs.get("bounds") or {})), "fit_settings": plain(settings),
@@ -507,7 +378,7 @@ def compare_batch(paths, models: Sequence[str], *, out=None, segment: str = "app
             if curve is not None:
                 try:
                     comparison = socbjax.compare_models(curve, models=tuple(models), **compare_kwargs)
-                    item["comparison"] = _finite(json.loads(json.dumps(comparison.to_dict(), default=float)))
+                    item["comparison"] = finite_json(json.loads(json.dumps(comparison.to_dict(), default=float)))
                     text = comparison.table()
                 except Exception as err:  # noqa: BLE001
                     error = _error_text(err)
@@ -520,6 +391,6 @@ def compare_batch(paths, models: Sequence[str], *, out=None, segment: str = "app
     record = {"format": "socbjax.model_comparison_batch", "format_version": 1, "socbjax_version": __version__,
               "models": list(models), "curves": curves_out}
     if folder is not None:
-        text = json.dumps(_finite(record), indent=2, allow_nan=False, ensure_ascii=False) + "\n"
+        text = json.dumps(finite_json(record), indent=2, allow_nan=False, ensure_ascii=False) + "\n"
         atomic_path(folder / "comparison.json", lambda tmp: tmp.write_text(text, encoding="utf-8"))
     return record

@@ -5,21 +5,10 @@ Model and residuals: :mod:`socbjax._fit_problem` (the probe force of a model, co
 loss is ½ Σ ((F̂ᵢ − Fᵢ)/σᵢ)² over the chosen branch (approach/loading by default).  Curves
 with more than ``FitSettings.max_points`` points are averaged in compression bins first.
 
-Optimisers.  ``"lm"`` (default): Levenberg–Marquardt on the unconstrained parameters (bounds
-by transforms, :class:`socbjax.Parameter`) with Marquardt's diagonal scaling; the residual
-Jacobian costs one linear solve per parameter and data point.  A step is taken only if the
-loss decreases; otherwise the damping grows ×4 and the step is retried, which also rejects
-steps into a region where the path cannot be followed — this is what keeps the fit robust at
-the collapse, where the force and its derivatives change fast.  ``"adam"`` and ``"lbfgs"``
-(optax) minimise the same loss with ``jax.value_and_grad``.
-
-Uncertainties (Gauss–Newton).  With J the residual Jacobian in the unconstrained variables
-z at the optimum, s² = Σ r²/(m − p) and Cz = s² (JᵀJ)⁻¹; the values' covariance is
-D Cz D with D = dθ/dz (delta method).  Standard errors are its square roots and the
-correlation matrix its normalisation.  A correlation of magnitude ≥ 0.995 (or a singular
-JᵀJ) marks the fit as not identifiable; fitting ``force_scale`` together with every EI is
-refused up front: the force of an elastica scales exactly with EI at fixed geometry, so one
-curve determines only the product EI × force_scale.
+Optimisers and uncertainties: :mod:`socbjax._least_squares` (Levenberg–Marquardt by default,
+Gauss–Newton standard errors).  Fitting ``force_scale`` together with every EI is refused up
+front: the force of an elastica scales exactly with EI at fixed geometry, so one curve
+determines only the product EI × force_scale.
 """
 
 from __future__ import annotations
@@ -36,15 +25,16 @@ import jax.numpy as jnp
 import numpy as np
 
 from ._afm import hysteresis_energy
+from ._batch_result import finite_json
 from ._fit_problem import BRANCHES, check_start, fit_problem, scaled_start
 from ._goodness import judge_fit
+from ._least_squares import gauss_newton_uncertainties, levenberg_marquardt, optax_minimise
 from ._path import PathSettings
 from ._solution import RESULTS, ConvergenceError, result_name
 
-__all__ = ["OPTIMIZERS", "FitResult", "FitSettings", "finite_json", "fit"]
+__all__ = ["OPTIMIZERS", "FitResult", "FitSettings", "fit"]
 
 OPTIMIZERS = ("lm", "adam", "lbfgs")
-_CORRELATION_LIMIT = 0.995
 
 
 @dataclasses.dataclass(frozen=True)
@@ -214,16 +204,6 @@ class FitResult(eqx.Module):
         atomic_path(path, lambda tmp: tmp.write_text(text))
 
 
-def finite_json(value):
-    """``value`` with every non-finite float replaced by None: strict JSON (no NaN or
-    Infinity, e.g. the standard errors of a singular fit)."""
-    if isinstance(value, dict):
-        return {k: finite_json(v) for k, v in value.items()}
-    if isinstance(value, list):
-        return [finite_json(v) for v in value]
-    return None if isinstance(value, float) and not math.isfinite(value) else value
-
-
 def plural(n: int, word: str, many: str | None = None) -> str:
     """``"1 point"``, ``"2 points"`` (``many``: an irregular plural)."""
     return f"{n} {word if n == 1 else (many or word + 's')}"
@@ -263,90 +243,6 @@ def _float_values(values: dict) -> dict:
     return {k: float(v) for k, v in values.items()}
 
 
-def _residual_variance(J, r) -> float:
-    """s² = |r|²/(m − p): the residual variance that scales the Gauss–Newton covariance."""
-    m, p = J.shape
-    return float(r @ r) / max(m - p, 1)
-
-
-def _within_standard_errors(J, r, step, fraction: float) -> bool:
-    """Every component of ``step`` (unconstrained variables) is below ``fraction`` of that
-    variable's Gauss–Newton standard error at (J, r): s² = |r|²/(m − p), SE² = s² diag((JᵀJ)⁺)."""
-    if not fraction > 0:
-        return False
-    se = np.sqrt(np.abs(_residual_variance(J, r) * np.diag(np.linalg.pinv(J.T @ J))))
-    return bool(np.all(np.abs(step) <= fraction * se))
-
-
-def _levenberg_marquardt(jac, z, max_iterations, tolerance, report, rejected=lambda iteration, damping: None,
-                         se_tolerance: float = 0.0):
-    """Minimise ½|r(z)|²; ``jac(z)`` -> (J [m, p], r [m]).  Returns (z, r, J, history, converged,
-    message, evaluations).  Stops at a gradient, relative loss decrease or step below
-    ``tolerance``, or an accepted step below ``se_tolerance`` standard errors in every variable."""
-    J, r = (np.asarray(a) for a in jac(z))
-    loss, damping, history, evaluations = 0.5 * float(r @ r), 1e-3, [], 1
-    converged, message = False, f"reached max_iterations={max_iterations}"
-    for iteration in range(1, max_iterations + 1):
-        A, g = J.T @ J, J.T @ r
-        scale = np.maximum(np.diag(A), 1e-12 * max(np.diag(A).max(), 1e-300))
-        if np.max(np.abs(g) / np.sqrt(scale)) <= tolerance * max(math.sqrt(2 * loss), 1e-300):
-            converged, message = True, "converged (gradient below tolerance)"
-            break
-        for _ in range(12):
-            step = np.linalg.solve(A + damping * np.diag(scale), -g)
-            trial = z + step
-            J_new, r_new = (np.asarray(a) for a in jac(jnp.asarray(trial)))
-            # NaN residuals: the path could not be followed at the trial values; reject the step
-            loss_new = 0.5 * float(r_new @ r_new) if np.all(np.isfinite(r_new)) and np.all(np.isfinite(J_new)) else math.inf
-            evaluations += 1
-            if loss_new < loss:
-                break
-            damping *= 4.0
-            rejected(iteration, damping)
-        else:
-            message = "stopped: no step decreased the loss (at a minimum to within the path's accuracy)"
-            converged = True
-            break
-        decrease = loss - loss_new
-        z, J, r, loss, damping = jnp.asarray(trial), J_new, r_new, loss_new, max(damping / 3.0, 1e-9)
-        history.append({"iteration": iteration, "loss": loss, "damping": damping, "z": np.asarray(z).tolist()})
-        report(iteration, loss, z)
-        if decrease <= tolerance * loss or np.max(np.abs(step)) <= tolerance * (1.0 + float(np.max(np.abs(z)))):
-            converged, message = True, "converged (relative loss decrease or step below tolerance)"
-            break
-        if _within_standard_errors(J, r, step, se_tolerance):
-            converged, message = True, f"converged (the last step moved every parameter by < {se_tolerance:g} SE)"
-            break
-    return z, r, J, history, converged, message, evaluations
-
-
-def _optax(loss_and_grad, loss_fn, z, optimizer, max_iterations, tolerance, learning_rate, report):
-    import optax
-
-    opt = optax.adam(learning_rate) if optimizer == "adam" else optax.lbfgs()
-    state, history, previous = opt.init(z), [], math.inf
-    converged, message = False, f"reached max_iterations={max_iterations}"
-    for iteration in range(1, max_iterations + 1):
-        loss, grad = loss_and_grad(z)
-        if not (np.isfinite(float(loss)) and np.all(np.isfinite(np.asarray(grad)))):
-            z = jnp.asarray(history[-2]["z"]) if len(history) > 1 else z
-            message = (f"stopped at iteration {iteration}: the path could not be followed at the optimiser's step; "
-                       "use the 'lm' optimizer (which rejects such steps) or a smaller Adam learning rate")
-            break
-        if optimizer == "lbfgs":
-            updates, state = opt.update(grad, state, z, value=loss, grad=grad, value_fn=loss_fn)
-        else:
-            updates, state = opt.update(grad, state, z)
-        z = optax.apply_updates(z, updates)
-        history.append({"iteration": iteration, "loss": float(loss), "damping": None, "z": np.asarray(z).tolist()})
-        report(iteration, float(loss), z)
-        if abs(previous - float(loss)) <= tolerance * float(loss):
-            converged, message = True, "converged (relative loss change below tolerance)"
-            break
-        previous = float(loss)
-    return z, history, converged, message, iteration
-
-
 # ------------------------------------------------------------------------------ fit
 def _with_value(fn):
     def both(z):
@@ -356,49 +252,15 @@ def _with_value(fn):
     return both
 
 
-def _uncertainties(J, r, z, table, free):
-    """Gauss–Newton covariance of the values, correlation, identifiability and warnings."""
-    p = J.shape[1]
-    s2 = _residual_variance(J, r)
-    A = J.T @ J
-    warnings = []
-    for i, name in enumerate(free):
-        lo, hi = table[name].lower, table[name].upper
-        value = float(table[name].to_value(float(z[i])))
-        near = 1e-3 * (hi - lo) if lo is not None and hi is not None else 1e-9 * max(abs(value), 1e-300)
-        if (lo is not None and value - lo <= near) or (hi is not None and hi - value <= near):
-            warnings.append(f"{name} = {value:.4g} {table[name].unit} is at its bound ({lo}, {hi}): the data push it "
-                            "further, the model does not describe them there; its error is not meaningful")
-    cond = np.linalg.cond(A) if p else 1.0
-    D = np.array([float(jax.grad(table[n].to_value)(float(z[i]))) for i, n in enumerate(free)])
-    singular = not np.isfinite(cond) or cond > 1e14
-    if singular:
-        warnings.append(f"JᵀJ is singular (condition number {cond:.3g}): the data do not determine all of {list(free)}")
-        cov = np.full((p, p), np.inf)
-    else:
-        cov = D[:, None] * (s2 * np.linalg.inv(A)) * D[None, :]
-    se = np.sqrt(np.abs(np.diag(cov)))
-    with np.errstate(invalid="ignore", divide="ignore"):
-        corr = cov / np.outer(se, se)
-    identifiable = not singular
-    for i in range(p):
-        for j in range(i + 1, p):
-            if np.isfinite(corr[i, j]) and abs(corr[i, j]) >= _CORRELATION_LIMIT:
-                identifiable = False
-                warnings.append(f"{free[i]} and {free[j]} are correlated {corr[i, j]:+.4f}: not separately identifiable "
-                                "from this curve; fix one of them")
-    return se, corr, cov, identifiable, warnings
-
-
 def _optimise(problem, settings: FitSettings, jac, report, bar):
     """Run the chosen optimiser: (z, history, converged, message, evaluations)."""
     if settings.optimizer == "lm":
-        z, _, _, history, converged, message, evaluations = _levenberg_marquardt(
+        z, _, _, history, converged, message, evaluations = levenberg_marquardt(
             jac, problem.z0, settings.max_iterations, settings.tolerance, report, bar.rejected, settings.se_tolerance)
         return z, history, converged, message, evaluations
     bar.note(f"compiling the loss's gradient ({settings.optimizer})")
     loss = lambda z: 0.5 * jnp.sum(problem.residuals(z) ** 2)
-    return _optax(jax.jit(jax.value_and_grad(loss)), jax.jit(loss), problem.z0, settings.optimizer,
+    return optax_minimise(jax.jit(jax.value_and_grad(loss)), jax.jit(loss), problem.z0, settings.optimizer,
                   settings.max_iterations, settings.tolerance, settings.learning_rate, report)
 
 
@@ -524,7 +386,7 @@ def _result(problem, settings, jac, z, history, converged, message, evaluations,
     for h in history:
         h["values"] = _float_values(problem.to_values(jnp.asarray(h.pop("z"))))
     free, table = problem.free, problem.table
-    se, corr, cov, identifiable, warnings = _uncertainties(J, r, np.asarray(z), table, free)
+    se, corr, cov, identifiable, warnings = gauss_newton_uncertainties(J, r, np.asarray(z), table, free)
     weighted, r = r, r * problem.sigma  # back to pN
     spread = float(np.sum((problem.force - problem.force.mean()) ** 2))
     r_squared = 1.0 - float(r @ r) / spread if spread > 0 else -math.inf
