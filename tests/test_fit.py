@@ -231,3 +231,36 @@ def test_step_below_a_fraction_of_the_standard_errors_stops_at_the_tight_optimum
     assert loose.n_evaluations <= tight.n_evaluations
     with pytest.raises(ValueError, match="se_tolerance"):
         sj.FitSettings(se_tolerance=-1.0)
+
+
+class _CountingColumn(ColumnModel):
+    """A column that records how many probe travels each evaluation asks for."""
+
+    def probe_force(self, values, u, **kwargs):
+        self.asked.append(int(u.shape[0]))
+        return super().probe_force(values, u, **kwargs)
+
+
+def test_points_before_contact_at_every_allowed_shift_cost_no_equilibria():
+    """A long approach (30 of 40 points before contact): the points that lie before contact at
+    every contact point the bounds allow are not sent to the model, and the residuals equal
+    model.predict's over all points (which solves every one)."""
+    model = _CountingColumn(4, supports=("pinned", "pinned"), dim=2)
+    model.asked = []
+    c = np.linspace(-0.6, 0.2, 41)
+    F = _synthetic(model, {"EI": 0.071}, c - 0.01, seed=5)
+    problem = sj.fit_problem((c, F), model, free=("EI", "contact_point", "baseline"))
+    z = problem.z0 + 0.01
+    values = problem.to_values(z)
+    reference = np.asarray(model.predict(values, c, reach=problem.reach)) - F
+    assert model.asked[-1] == c.size
+    r = np.asarray(problem.residuals(z))
+    lower = problem.table["contact_point"].lower  # −0.1 × the largest compression by default
+    assert model.asked[-1] == int(np.sum(c - lower > 0)) < c.size // 2
+    np.testing.assert_allclose(r, reference, rtol=1e-9, atol=1e-9 * np.abs(F).max())
+    open_bounds = sj.fit_problem((c, F), model, free=("EI", "contact_point", "baseline"),
+                                 bounds={"contact_point": (None, None)})
+    z_open = np.array([open_bounds.table[n].to_z(float(values[n])) for n in open_bounds.free])  # the same values
+    np.testing.assert_allclose(np.asarray(open_bounds.residuals(z_open)), reference, rtol=1e-9,
+                               atol=1e-9 * np.abs(F).max())
+    assert model.asked[-1] == c.size
