@@ -16,6 +16,8 @@ import math
 import sys
 from pathlib import Path
 
+from ._progress import plural  # stdlib only
+
 __all__ = ["add_fit_parser", "check_fit_args", "run_fit", "CLI_FIXES"]
 
 SUPPORTS = ("clamped", "pinned", "free")
@@ -117,7 +119,7 @@ def check_fit_args(args) -> None:
         if args.out is not None and args.out.lower().endswith(".json"):
             raise ValueError(f"--compare writes DIR/comparison.json: give --out a folder, not {args.out!r}")
     elif batch_mode(args) and args.out.lower().endswith(".json"):
-        raise ValueError(f"--out {args.out} names a JSON file, but {_plural(len(args.curves), 'CURVE argument')} "
+        raise ValueError(f"--out {args.out} names a JSON file, but {plural(len(args.curves), 'CURVE argument')} "
                          "(or a folder) make a batch: give --out a folder (created if missing) for results.csv, "
                          "results.json and the figures")
     _check_numbers(args)
@@ -184,10 +186,6 @@ def _check_numbers(args) -> None:
             raise ValueError(f"{option} must be a positive finite number{unit}, got {value}")
 
 
-def _plural(n: int, word: str) -> str:
-    return f"{n} {word if n == 1 else word + 's'}"
-
-
 def _settings(args):
     import socbjax as sj
 
@@ -226,7 +224,7 @@ def _run_batch(args) -> int:
                       fixed=fixed, initial=initial, settings=_settings(args), model_options=options,
                       progress=not args.quiet, _cli_fixes=CLI_FIXES, _dim_option=_dim_fix(args))
     out = Path(args.out).expanduser()
-    print(f"{_plural(len(batch), 'curve')}: {batch.n_converged} converged, "
+    print(f"{plural(len(batch), 'curve')}: {batch.n_converged} converged, "
           f"{len(batch) - batch.n_converged - batch.n_failed} not converged, {batch.n_failed} failed; wrote "
           f"{out / 'results.csv'}, {out / 'results.json'}, {out / 'summary.png'} and the figure of each fitted curve")
     if batch.exit_status:
@@ -270,7 +268,7 @@ def _run_single(args) -> int:
                        segment="approach" if args.branch == "loading" else "retract")
     model = sj.make_fit_model(args.model, **options)
     check_dimension(curve, model, option=_dim_fix(args))
-    print(f"socbjax fit: {_plural(len(curve), 'point')} from {path}, compression up to "
+    print(f"socbjax fit: {plural(len(curve), 'point')} from {path}, compression up to "
           f"{curve.compression.max():.4g} µm, force up to {curve.force.max():.4g} pN; model {args.model} "
           f"({model_dim(model) or '?'}D), free {', '.join(free) or '(none)'}", file=sys.stderr)
     try:

@@ -30,6 +30,7 @@ from ._fit_problem import BRANCHES, check_start, fit_problem, scaled_start
 from ._goodness import judge_fit
 from ._least_squares import gauss_newton_uncertainties, levenberg_marquardt, optax_minimise
 from ._path import PathSettings
+from ._progress import plural
 from ._solution import RESULTS, ConvergenceError, result_name
 
 __all__ = ["OPTIMIZERS", "FitResult", "FitSettings", "fit"]
@@ -202,11 +203,6 @@ class FitResult(eqx.Module):
 
         text = json.dumps(self.to_dict(), indent=2, allow_nan=False)
         atomic_path(path, lambda tmp: tmp.write_text(text))
-
-
-def plural(n: int, word: str, many: str | None = None) -> str:
-    """``"1 point"``, ``"2 points"`` (``many``: an irregular plural)."""
-    return f"{n} {word if n == 1 else (many or word + 's')}"
 
 
 class _Progress:

@@ -16,10 +16,15 @@ import sys
 import threading
 import time
 
-__all__ = ["Progress", "TICK_S", "LOG_EVERY_S"]
+__all__ = ["Progress", "TICK_S", "LOG_EVERY_S", "plural"]
 
 TICK_S = 1.0  # terminal refresh of the elapsed time (s)
 LOG_EVERY_S = 10.0  # at most one line per this many seconds where stderr is not a terminal
+
+
+def plural(n: int, word: str, many: str | None = None) -> str:
+    """``"1 point"``, ``"2 points"`` (``many``: an irregular plural) for progress and status lines."""
+    return f"{n} {word if n == 1 else (many or word + 's')}"
 
 
 def _isatty(stream) -> bool:

@@ -16,6 +16,7 @@ import sys
 from pathlib import Path
 
 from ._cli_fit import add_fit_parser  # stdlib only at module level (socbjax fit's parser)
+from ._progress import plural  # stdlib only
 
 __all__ = ["main", "build_parser"]
 
@@ -188,10 +189,6 @@ def _check_simulate(args) -> None:
         _supports(args.supports)
 
 
-def _plural(n: int, noun: str) -> str:
-    return f"{n} {noun}{'' if n == 1 else 's'}"
-
-
 def _build(args):
     """(network, parameters, default displacement) for ``socbjax simulate``."""
     import socbjax as sj
@@ -281,8 +278,8 @@ def _simulate(args) -> int:
     with output_lock(out):  # a second run on the same --out refuses instead of deleting our checkpoints
         _check_checkpoint(args, checkpoint)
         print(
-            f"socbjax simulate {args.network}: {_plural(net.n_nodes, 'node')}, {_plural(net.n_segments, 'segment')}, "
-            f"{_plural(net.n_junctions, 'junction')}; probe travel {displacement:g} µm"
+            f"socbjax simulate {args.network}: {plural(net.n_nodes, 'node')}, {plural(net.n_segments, 'segment')}, "
+            f"{plural(net.n_junctions, 'junction')}; probe travel {displacement:g} µm"
             f"{' and back' if args.unload else ''}",
             file=sys.stderr,
         )

@@ -101,7 +101,7 @@ def test_column_supports_default_and_separator_match_fit():
     assert args.supports == "clamped,pinned"
     assert socbjax.cli._supports(" clamped , free ") == ("clamped", "free")
     assert socbjax.cli._SUPPORT_KINDS == socbjax.SUPPORTS  # the solver's names, without importing it
-    assert [socbjax.cli._plural(n, "junction") for n in (0, 1, 2)] == ["0 junctions", "1 junction", "2 junctions"]
+    assert [socbjax.cli.plural(n, "junction") for n in (0, 1, 2)] == ["0 junctions", "1 junction", "2 junctions"]
 
 
 def test_simulate_help_documents_units(capsys):
