@@ -17,7 +17,7 @@ __all__ = ["BatchResult", "finite_json"]
 
 @dataclasses.dataclass
 class BatchResult:
-    """Outcome of :func:`fit_batch`.
+    """Outcome of :func:`socbjax.fit_batch`.
 
     rows : one dict per curve, in the batch's order (file name, path, curve index); keys
         :attr:`columns`.  Failed curves have ``status = "failed"``, the error in ``message``
