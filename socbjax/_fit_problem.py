@@ -200,13 +200,17 @@ def parameter_table(model: FitModel, free, fixed, initial, bounds) -> tuple[dict
     return table, free, fixed, start
 
 
+_CONTACT_RUN = 3  # points above the threshold in a row that mark contact (not a noise spike)
+
+
 def _contact_start(c, F, retract, parameter: Parameter) -> float:
     """A start for a free ``contact_point`` (µm): the first approach compression where the force
     leaves the baseline (median of the points before c = 0) by more than 5 × its noise
-    (:func:`socbjax.estimate_noise`) and 5 % of the force range; 0 when the curve has fewer than 5
-    points before contact or never leaves it.  A gradient cannot find the contact of a network
-    whose force rises within 10⁻⁴ µm of contact (the residuals are flat in it between data
-    points), so the start must be close."""
+    (:func:`socbjax.estimate_noise`) and 5 % of the force range, and stays above that for the
+    next ``_CONTACT_RUN`` − 1 points (those there are): a lone noise spike in the baseline is
+    not contact; 0 when the curve has fewer than 5 points before contact or never leaves it.
+    A gradient cannot find the contact of a network whose force rises within 10⁻⁴ µm of
+    contact (the residuals are flat in it between data points), so the start must be close."""
     approach = np.ones(c.size, bool) if retract is None else ~retract
     c, F = c[approach], F[approach]
     before = c < 0
@@ -215,8 +219,10 @@ def _contact_start(c, F, retract, parameter: Parameter) -> float:
     base = float(np.median(F[before]))
     noise = estimate_noise(F[before])
     threshold = max(5 * noise, 0.05 * float(np.ptp(F)))
-    leaves = np.flatnonzero(F - base > threshold)
-    if leaves.size == 0:
+    above = F - base > threshold
+    # the first point of a run of _CONTACT_RUN points above (shorter at the end of the curve)
+    leaves = [k for k in np.flatnonzero(above) if above[k:k + _CONTACT_RUN].all()]
+    if not leaves:
         return 0.0
     k = int(leaves[0])
     guess = 0.5 * (c[k] + c[k - 1]) if k > 0 else float(c[k])

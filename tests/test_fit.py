@@ -264,3 +264,24 @@ def test_points_before_contact_at_every_allowed_shift_cost_no_equilibria():
     np.testing.assert_allclose(np.asarray(open_bounds.residuals(z_open)), reference, rtol=1e-9,
                                atol=1e-9 * np.abs(F).max())
     assert model.asked[-1] == c.size
+
+
+def test_contact_point_start_ignores_a_noise_spike_in_the_baseline():
+    """The start of a free contact point is where the force leaves the baseline and stays
+    out: one baseline point pushed 6 noise levels up (a spike, not contact) does not move it
+    there, and the fit recovers the contact point within a point spacing."""
+    model = ColumnModel(4, supports=("pinned", "pinned"), dim=2)
+    c = np.linspace(-0.06, 0.2, 60)
+    truth = 0.05
+    F = _synthetic(model, {"EI": 0.071}, c - truth, seed=2, noise=0.0)
+    rng = np.random.default_rng(2)
+    sigma = 0.01 * F.max()
+    F = F + sigma * rng.standard_normal(c.size)
+    spike = 5  # c = −0.038 µm
+    F[spike] += 6 * sigma
+    problem = sj.fit_problem((c, F), model, free=("EI", "contact_point", "baseline"))
+    spacing = c[1] - c[0]
+    assert abs(float(problem.to_values(problem.z0)["contact_point"]) - truth) <= spacing
+    result = sj.fit((c, F), model, free=("EI", "contact_point", "baseline"))
+    assert abs(result.values["contact_point"] - truth) <= spacing
+    assert result.values["EI"] == pytest.approx(0.071, rel=0.02)
