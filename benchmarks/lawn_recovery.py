@@ -116,8 +116,10 @@ def plot(rows: list, title: str = ""):
     ax.axhspan(-5, 5, color="0.9", label="±5 %")
     ax.axhline(0, color="0.4", lw=0.8)
     ax.errorbar(x, err, yerr=2 * total, fmt="o", color="C0", capsize=3, label="EI fit ± 2 total SE")
-    for r in (r for r in rows if r["fit"] == "density"):
-        ax.plot(r["noise_seed"] + 0.15, 100 * r["rel_error"], "s", color="C2", ms=5, label="density fit (EI known)")
+    density = [r for r in rows if r["fit"] == "density"]
+    if density:
+        ax.plot([r["noise_seed"] + 0.15 for r in density], [100 * r["rel_error"] for r in density], "s", color="C2",
+                ms=5, ls="none", label="density fit (EI known)")
     ax.set_xlabel("experiment (own truth outcrops, model realisations and noise)")
     ax.set_ylabel("relative error of the fitted value (%)")
     ax.set_xticks(x)
@@ -154,13 +156,12 @@ def _experiment(seed: int, c: np.ndarray) -> dict:
     block = TRUTH_SEED_BLOCK * (seed + 1)
     truth = sj.LawnModel(seed=block, n_outcrops=N_TRUTH, screen=SCREEN, **LAWN)
     model = sj.LawnModel(seed=block + MODEL_SEED_OFFSET, n_outcrops=N_MODEL, screen=SCREEN, **LAWN)
-    per = {}
+    per = {}  # ρ A F_k(u) of each realisation k (pN), u = c − contact point: their mean is the lawn's force
     for name, lawn in (("truth", truth), ("model", model)):
-        f, _ = lawn.outcrop_forces(TRUTH, c - TRUTH["contact_point"], reach=REACH)  # F_k(u), u = c − contact point
-        per[name] = np.asarray(f)
-    clean = TRUTH["density"] * LAWN["probe_area"] * per["truth"].mean(axis=0)
+        per[name] = np.asarray(lawn.lawn_forces(TRUTH, c - TRUTH["contact_point"], reach=REACH)[0])
+    clean = per["truth"].mean(axis=0)
     noisy = clean + 0.02 * clean.max() * np.random.default_rng(seed).standard_normal(c.size)
-    deepest = {name: per[name][:, -1] for name in per}
+    deepest = {name: per[name][:, -1] / (TRUTH["density"] * LAWN["probe_area"]) for name in per}  # one outcrop's force
     stiff = 0.5 * (min(min(d) for d in deepest.values()) + max(max(d) for d in deepest.values()))
     info = {"truth_seeds": truth.seeds, "model_seeds": model.seeds,
             "screened_out": truth.screened_out + model.screened_out, "seconds": time.perf_counter() - t0,
