@@ -48,7 +48,8 @@ from ._curve_inputs import (
     read_curve,
     sha256,
 )
-from ._batch_result import BatchResult, finite_json
+from ._batch_result import BatchResult
+from ._io import finite_json
 from ._fit_model import contact_shift
 
 __all__ = ["BatchResult", "fit_batch", "compare_batch", "collect_curve_files", "read_curve", "curve_from_result",

@@ -12,7 +12,9 @@ from pathlib import Path
 
 import numpy as np
 
-__all__ = ["BatchResult", "finite_json"]
+from ._io import finite_json
+
+__all__ = ["BatchResult"]
 
 
 @dataclasses.dataclass
@@ -109,22 +111,6 @@ def _fmt(value) -> str:
         return "n/a"
     value = float(value)
     return "n/a" if not math.isfinite(value) else f"{value:.4g}"
-
-
-def finite_json(value):
-    """``value`` with every non-finite float replaced by None and numpy scalars made Python
-    ones: strict JSON (no NaN or Infinity, e.g. the standard errors of a singular fit)."""
-    if isinstance(value, dict):
-        return {k: finite_json(v) for k, v in value.items()}
-    if isinstance(value, (list, tuple)):
-        return [finite_json(v) for v in value]
-    if isinstance(value, (float, np.floating)):
-        return float(value) if math.isfinite(value) else None
-    if isinstance(value, np.integer):
-        return int(value)
-    if isinstance(value, np.bool_):
-        return bool(value)
-    return value
 
 
 def _csv_cell(value) -> str:

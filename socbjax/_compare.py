@@ -80,7 +80,7 @@ class ModelComparison:
 
     def to_dict(self) -> dict:
         """JSON-ready: ``best``, ``models`` and ``rows`` (non-finite numbers as None)."""
-        from ._batch_result import finite_json
+        from ._io import finite_json
 
         rows = [{k: (list(v) if isinstance(v, tuple) else v) for k, v in r.items()} for r in self.rows]
         return finite_json(json.loads(json.dumps({"best": self.best, "models": list(self.models), "rows": rows},

@@ -25,7 +25,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from ._afm import hysteresis_energy
-from ._batch_result import finite_json
+from ._io import finite_json
 from ._fit_problem import BRANCHES, check_start, fit_problem, scaled_start
 from ._goodness import judge_fit
 from ._least_squares import gauss_newton_uncertainties, levenberg_marquardt, optax_minimise

@@ -56,6 +56,7 @@ import dataclasses
 import datetime
 import errno
 import json
+import math
 import os
 import stat
 import tempfile
@@ -85,8 +86,8 @@ from ._version import __version__
 TOPOLOGY_FIELDS = ("segments", "position_projector", "clamped", "moment_free", "attach", "transfer_segment",
                    "leaving_segment", "probe", "probe_direction", "strand", "socb_rows")
 
-__all__ = ["FORMAT_VERSION", "UNITS", "atomic_path", "check_output_path", "load", "load_checkpoint", "output_lock",
-           "save", "save_checkpoint"]
+__all__ = ["FORMAT_VERSION", "UNITS", "atomic_path", "check_output_path", "finite_json", "load", "load_checkpoint",
+           "output_lock", "save", "save_checkpoint"]
 
 UNITS = {
     "displacement": "µm",
@@ -108,6 +109,23 @@ UNITS = {
 }
 _COMPRESS_ABOVE = 4096  # elements; smaller datasets are stored contiguous, uncompressed
 _LIMIT_TYPES = {"int": np.dtype(np.int64), "float": np.dtype(np.float64)}
+
+
+# ----------------------------------------------------------------------------- strict JSON
+def finite_json(value):
+    """``value`` with every non-finite float replaced by None and numpy scalars made Python
+    ones: strict JSON (no NaN or Infinity, e.g. the standard errors of a singular fit)."""
+    if isinstance(value, dict):
+        return {k: finite_json(v) for k, v in value.items()}
+    if isinstance(value, (list, tuple)):
+        return [finite_json(v) for v in value]
+    if isinstance(value, (float, np.floating)):
+        return float(value) if math.isfinite(value) else None
+    if isinstance(value, np.integer):
+        return int(value)
+    if isinstance(value, np.bool_):
+        return bool(value)
+    return value
 
 
 # ----------------------------------------------------------------------------- output paths
