@@ -242,7 +242,7 @@ class _CountingColumn(ColumnModel):
 
 
 def test_points_before_contact_at_every_allowed_shift_cost_no_equilibria():
-    """A long approach (30 of 40 points before contact): the points that lie before contact at
+    """A long approach (31 of 41 points before contact): the points that lie before contact at
     every contact point the bounds allow are not sent to the model, and the residuals equal
     model.predict's over all points (which solves every one)."""
     model = _CountingColumn(4, supports=("pinned", "pinned"), dim=2)
