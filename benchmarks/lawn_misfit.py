@@ -6,9 +6,13 @@ Companion of ``lawn_recovery.py`` (same lawn, same truth: EI = 0.09 pN·µm², �
 point 0.05 µm, 2 % noise, experiment i's truth outcrops from seed 1000 (i + 1)).  The curve here
 is what :func:`socbjax.fit` makes of a real AFM curve: 80 points (``FitSettings.max_points``)
 from −¼ of the largest compression (``min_compression``'s default) to 0.25 µm, so 16 points
-before contact and 50 in contact.  ``lawn_recovery.py``'s curve has 34 before contact and only
-14 in contact: there even the true noise level leaves the column's misfit at p ≈ 0.02 (runs
-test and χ²), short of the warning's p < 1e-3.
+before contact and 50 in contact.  Like a measured curve it is a ``ForceCurve`` whose approach
+starts APPROACH = 2 µm before the window, at the same point spacing and noise (505 more
+points at zero force): ``fit`` crops them away but estimates the noise from them too (before
+2026-12-03 it used only the window's 16, ν ≈ 4.5 effective degrees of freedom, and the χ²
+test had no power).  ``lawn_recovery.py``'s curve has 34 points before contact and only 14 in
+contact: there even the true noise level leaves the column's misfit at p ≈ 0.02 (runs test
+and χ²), short of the warning's p < 1e-3.
 
 Fits per experiment: the column (free EI, contact point, baseline) and the lawn model of
 N_MODEL other realisations (``LawnModel(seed=1000 (i + 1) + 500, screen=0.3)``; free EI,
@@ -33,6 +37,7 @@ from lawn_recovery import LAWN, MODEL_SEED_OFFSET, N_TRUTH, REACH, SCREEN, TRUTH
 
 N_MODEL = 8  # realisations of the lawn model (lawn_recovery.py: 16; the misfit verdict does not need the SE)
 COMPRESSION = np.linspace(-0.25 * REACH, REACH, 80)  # µm: a real curve as fit() bins and crops it
+APPROACH = 2.0  # µm of approach before the fitted window (cropped by fit, used for the noise)
 
 
 def _row(seed: int, name: str, result, seconds: float) -> dict:
@@ -40,6 +45,7 @@ def _row(seed: int, name: str, result, seconds: float) -> dict:
     return {"experiment": seed, "fit": name, "converged": bool(result.converged), "misfit": bool(result.misfit),
             "chi2_reduced": float(result.chi2_reduced), "chi2_p": g.get("chi2_p"),
             "runs_p": (g.get("runs") or {}).get("p_value"), "noise_pN": float(result.noise),
+            "n_baseline": g.get("n_baseline"),
             "EI": float(result.values["EI"]), "seconds": seconds}
 
 
@@ -54,7 +60,11 @@ def main(argv=None) -> int:
         truth = sj.LawnModel(seed=block, n_outcrops=N_TRUTH, screen=SCREEN, **LAWN)
         model = sj.LawnModel(seed=block + MODEL_SEED_OFFSET, n_outcrops=N_MODEL, screen=SCREEN, **LAWN)
         clean = np.asarray(truth.predict(TRUTH, c, reach=REACH))
-        curve = (c, clean + 0.02 * clean.max() * np.random.default_rng(seed).standard_normal(c.size))
+        rng = np.random.default_rng(seed)
+        window = clean + 0.02 * clean.max() * rng.standard_normal(c.size)  # drawn first: the window as before
+        far = c[0] - (c[1] - c[0]) * np.arange(int(APPROACH / (c[1] - c[0])), 0, -1)
+        curve = sj.ForceCurve(np.concatenate([far, c]),
+                              np.concatenate([0.02 * clean.max() * rng.standard_normal(far.size), window]))
         print(f"experiment {seed}: truth and model screened, curve simulated ({time.perf_counter() - t0:.0f} s)", flush=True)
         for name in ("column", "lawn"):
             t1 = time.perf_counter()
@@ -71,13 +81,14 @@ def main(argv=None) -> int:
         summary = {name: {"n": sum(r["fit"] == name for r in rows),
                           "misfit": sum(r["misfit"] for r in rows if r["fit"] == name)} for name in ("column", "lawn")}
         _common.write_json(args.out, "lawn_misfit", args, {"truth": TRUTH, "lawn": LAWN, "compression_um": c,
-                                                           "n_model": N_MODEL, "n_truth": N_TRUTH, "rows": rows,
+                                                           "n_model": N_MODEL, "n_truth": N_TRUTH, "approach_um": APPROACH, "rows": rows,
                                                            "summary": summary})
     table = [[r["experiment"], r["fit"], r["misfit"], _common.fmt(r["chi2_reduced"], ".2f"),
               _common.fmt(r["chi2_p"], ".2g"), _common.fmt(r["runs_p"], ".2g"), _common.fmt(r["noise_pN"], ".3g"),
               _common.fmt(r["seconds"], ".0f")] for r in rows]
     _common.print_table(["experiment", "fit", "misfit", "chi2_red", "chi2 p", "runs p", "noise (pN)", "s"], table,
-                        title="misfit warning on 80-point lawn curves (16 before contact, 50 in contact), 2 % noise")
+                        title="misfit warning on 80-point lawn curves (16 before contact, 50 in contact; noise from the "
+                              f"whole {APPROACH:g} µm approach), 2 % noise")
     for name, s in summary.items():
         print(f"{name}: misfit warning on {s['misfit']} of {s['n']}")
     return 0

@@ -33,8 +33,8 @@ curve determines only their product and the fit refuses both free; each is recov
 the other held at its independently known value:
 
 * "EI": free EI, contact_point, baseline; density fixed at the truth;
-* "density": free density, contact_point, baseline; EI fixed at the truth (on the first
-  DENSITY_SEEDS experiments: it is the EI fit reparametrised, ρ̂/ρ = ÊI/EI);
+* "density": free density, contact_point, baseline; EI fixed at the truth (it is the EI fit
+  reparametrised, ρ̂/ρ = ÊI/EI, and about 3 × cheaper: it starts closer);
 * "column": the single column (free EI, contact_point, baseline) fitted to the same lawn
   curve, a misspecified model whose misfit warning should fire.
 
@@ -43,8 +43,9 @@ the realisation SE (the model's 16 realisations and the experiment's 30 outcrops
 ``LawnModel.realisation_covariance``).
 
 Run:  PYTHONPATH=. python benchmarks/lawn_recovery.py [--quick] [--out DIR]
-      (full: 10 experiments; --quick: 1; LAWN_RECOVERY_SEEDS=3,4 runs those only; prints
-      each fit as it finishes; one experiment ≈ 5 min on 2 cores)
+      (full: 10 experiments; --quick: 1; LAWN_RECOVERY_SEEDS=3,4 runs those experiments only,
+      LAWN_RECOVERY_FITS=density those fits only (default EI,density,column); prints each fit
+      as it finishes; one experiment ≈ 5–10 min on 2 cores)
 """
 
 from __future__ import annotations
@@ -64,10 +65,7 @@ N_MODEL, N_TRUTH = 16, 30  # the truth: ρ A = 1.5 µm⁻² × 20 µm² outcrops
 TRUTH_SEED_BLOCK = 1000  # experiment i draws its truth outcrops from seed 1000 (i + 1) on
 MODEL_SEED_OFFSET = 500  # ... and its model realisations from seed 1000 (i + 1) + 500 on
 COMPRESSION = np.linspace(-0.5, REACH, 51)  # µm: 0.015 µm spacing, 34 points before contact
-# At fixed geometry F ∝ EI · ρ exactly, so the density fit at known EI is the EI fit at known
-# ρ reparametrised: the same Levenberg–Marquardt path, ρ̂/ρ = ÊI/EI (measured at an earlier
-# design: identical to 6 digits).  It runs on this many experiments to show that.
-DENSITY_SEEDS = 1
+FITS = ("EI", "density", "column")
 
 
 def _fit(curve, model, target: str, fixed: dict) -> dict:
@@ -93,7 +91,7 @@ def _column(curve) -> dict:
             "contact_point_error_um": float(result.values["contact_point"] - TRUTH["contact_point"])}
 
 
-def _summary(rows, n_seeds: int) -> dict:
+def _summary(rows) -> dict:
     summary = {}
     for target, limit in (("EI", 0.05), ("density", 0.10)):
         sel = [r for r in rows if r["fit"] == target]
@@ -101,7 +99,7 @@ def _summary(rows, n_seeds: int) -> dict:
                            "limit": limit, "within_2se": sum(abs(r["z"]) <= 2 for r in sel),
                            "misfit": sum(r["misfit"] for r in sel),
                            "median_rel_error": float(np.median([r["rel_error"] for r in sel])) if sel else None}
-    summary["column"] = {"n": n_seeds, "misfit": sum(r["misfit"] for r in rows if r["fit"] == "column")}
+    summary["column"] = {"n": sum(r["fit"] == "column" for r in rows), "misfit": sum(r["misfit"] for r in rows if r["fit"] == "column")}
     return summary
 
 
@@ -174,11 +172,14 @@ def main(argv=None) -> int:
     args = _common.parse_args(__doc__, argv)
     chosen = os.environ.get("LAWN_RECOVERY_SEEDS")  # e.g. "3,4,5": run these experiments only
     seeds = [int(k) for k in chosen.split(",")] if chosen else [0] if args.quick else list(range(10))
+    fits = os.environ.get("LAWN_RECOVERY_FITS", ",".join(FITS)).split(",")  # e.g. "density": those fits only
+    if set(fits) - set(FITS):
+        raise SystemExit(f"LAWN_RECOVERY_FITS={','.join(fits)}: each fit must be one of {', '.join(FITS)}")
     c = COMPRESSION
     lawn = {**LAWN, "screen_um": SCREEN, "compression_um": c, "n_model": N_MODEL, "n_truth": N_TRUTH,
             "experiments": {}}
     rows = []
-    for n_done, seed in enumerate(seeds, 1):
+    for seed in seeds:
         exp = _experiment(seed, c)
         info, curve, model = exp["info"], exp["curve"], exp["model"]
         lawn["experiments"][seed] = info
@@ -187,17 +188,16 @@ def main(argv=None) -> int:
               f"force at the deepest point: truth {info['mean_outcrop_force_at_deepest_pN']['truth']:.4f} pN, model "
               f"{info['mean_outcrop_force_at_deepest_pN']['model']:.4f} pN; stiff fraction {info['stiff_fraction']} "
               f"({info['seconds']:.0f} s)", flush=True)
-        fits = [("EI", {"density": TRUTH["density"]}), ("column", None)]
-        if n_done <= DENSITY_SEEDS:
-            fits.insert(1, ("density", {"EI": TRUTH["EI"]}))
-        for target, fixed in fits:
+        fixed_by_fit = {"EI": {"density": TRUTH["density"]}, "density": {"EI": TRUTH["EI"]}, "column": None}
+        for target in fits:
+            fixed = fixed_by_fit[target]
             row = _column(curve) if target == "column" else _fit(curve, model, target, fixed)
             rows.append({"noise_seed": seed, **row})
             rel, z = row.get("rel_error", float("nan")), row.get("z", float("nan"))
             print(f"  experiment {seed} {row['fit']:<8s} {rel:+.4f}  z {z:+.2f}  misfit {row['misfit']}  "
                   f"chi2_red {row['chi2_reduced']:.2f}  {row['seconds']:.0f} s", flush=True)
         _common.write_json(args.out, "lawn_recovery", args, {"truth": TRUTH, "lawn": lawn, "rows": rows,
-                                                             "summary": _summary(rows, n_done)})
+                                                             "summary": _summary(rows)})
         _common.save_figure(plot(rows, f"lawn recovery: {N_TRUTH} truth outcrops, {N_MODEL} model realisations, "
                                        "2 % noise, contact point and baseline fitted"), args.out, "lawn_recovery")
     table = [[r["noise_seed"], r["fit"], _common.fmt(r.get("rel_error"), "+.4f"), _common.fmt(r.get("z"), "+.2f"),
@@ -208,7 +208,7 @@ def main(argv=None) -> int:
                          "chi2_red", "s"], table,
                         title=f"lawn recovery: each experiment {N_TRUTH} truth outcrops, a model of {N_MODEL} other "
                               "realisations, 2 % noise")
-    for name, s in _summary(rows, len(seeds)).items():
+    for name, s in _summary(rows).items():
         print(f"{name}: " + ", ".join(f"{k} {v}" for k, v in s.items()))
     return 0
 

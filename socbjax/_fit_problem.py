@@ -24,6 +24,7 @@ import numpy as np
 
 from ._afm import ForceCurve
 from ._compress import compress
+from ._fit_data import FitData, bin_evaluation_points, bin_mean_force, fit_data
 from ._fit_model import FitModel, contact_shift, data_terms
 from ._goodness import estimate_noise
 from ._models import make_fit_model
@@ -109,6 +110,8 @@ class FitProblem:
         the data's range at those values: what to inspect when ``residuals`` fails.
     retract : [m] bool, the points on the retract (unloading) branch; None when only the
         approach is fitted (``branch="both"``: approach points first, then retract points).
+    data : the :class:`socbjax.FitData` fitted: the points with their bin ranges, and the
+        approach cropped away before the window (``data.baseline``, for the noise estimate).
     """
 
     residuals: Callable
@@ -124,58 +127,7 @@ class FitProblem:
     reach: float
     path: Callable | None = None
     retract: np.ndarray | None = None
-
-
-def _data(curve, branch: str, max_points: int, min_compression):
-    """(compression [m], force [m], retract [m] bool or None) of the fitted branch(es)."""
-    if branch != "both":
-        c, F = _branch_data(curve, branch, max_points, min_compression)
-        return c, F, (np.ones(c.size, bool) if branch == "unloading" else None)
-    if not isinstance(curve, ForceCurve):
-        raise ValueError("branch='both' needs a socbjax.ForceCurve with approach and retract (socbjax.load_curve); "
-                         "for (compression, force) arrays fit one branch")
-    if len(curve.approach) == 0 or len(curve.retract) == 0:
-        raise ValueError("branch='both': the curve has no retract segment (an approach only); fit branch='loading'")
-    c1, F1 = _branch_data(curve, "loading", max_points, min_compression)
-    c2, F2 = _branch_data(curve, "unloading", max_points, min_compression)
-    return (np.concatenate([c1, c2]), np.concatenate([F1, F2]),
-            np.concatenate([np.zeros(c1.size, bool), np.ones(c2.size, bool)]))
-
-
-def _branch_data(curve, branch: str, max_points: int, min_compression):
-    if isinstance(curve, ForceCurve):
-        segment = 0 if branch == "loading" else 1
-        part = curve if np.all(curve.segment == segment) else (curve.approach if segment == 0 else curve.retract)
-        if len(part) == 0 or part.compression.max() <= 0:
-            raise ValueError(f"the {branch} branch never passes the contact point (no compression > 0): nothing to fit")
-        low = -0.25 * part.compression.max() if min_compression is None else float(min_compression)
-        part = part.select(min_compression=low)
-        if len(part) > max_points:
-            part = part.binned(max_points)
-        c, F = np.asarray(part.compression, float), np.asarray(part.force, float)
-    else:
-        try:
-            c, F = (np.asarray(a, float) for a in curve)
-        except (TypeError, ValueError) as err:
-            raise TypeError("curve must be a socbjax.ForceCurve or a pair (compression µm, force pN)") from err
-        if c.ndim != 1 or c.shape != F.shape:
-            raise ValueError(f"compression and force must be 1-D arrays of equal length, got {c.shape} and {F.shape}")
-        if not (np.all(np.isfinite(c)) and np.all(np.isfinite(F))):
-            bad = int(np.sum(~np.isfinite(c)) + np.sum(~np.isfinite(F)))
-            raise ValueError(f"the curve contains {bad} NaN/inf values; drop those points before fitting")
-        if c.size and np.any(np.diff(c) < 0):
-            raise ValueError(
-                "compression must be non-decreasing along the curve (one branch, sorted); sort the points, or load "
-                "a measured curve with socbjax.load_curve, which separates approach and retract"
-            )
-        if min_compression is not None:
-            keep = c >= float(min_compression)
-            c, F = c[keep], F[keep]
-    if c.size < 3:
-        raise ValueError(f"the {branch} branch has {c.size} points; a fit needs at least 3")
-    if c.max() <= 0:
-        raise ValueError("the curve never passes the contact point (all compressions ≤ 0): nothing to fit")
-    return c, F
+    data: FitData | None = None
 
 
 def parameter_table(model: FitModel, free, fixed, initial, bounds) -> tuple[dict[str, Parameter], tuple, dict, dict]:
@@ -203,16 +155,18 @@ def parameter_table(model: FitModel, free, fixed, initial, bounds) -> tuple[dict
 _CONTACT_RUN = 3  # points above the threshold in a row that mark contact (not a noise spike)
 
 
-def _contact_start(c, F, retract, parameter: Parameter) -> float:
+def _contact_start(data: FitData, parameter: Parameter) -> float:
     """A start for a free ``contact_point`` (µm): the first approach compression where the force
     leaves the baseline (median of the points before c = 0) by more than 5 × its noise
     (:func:`socbjax.estimate_noise`) and 5 % of the force range, and stays above that for the
     next ``_CONTACT_RUN`` − 1 points (those there are): a lone noise spike in the baseline is
     not contact; 0 when the curve has fewer than 5 points before contact or never leaves it.
     A gradient cannot find the contact of a network whose force rises within 10⁻⁴ µm of
-    contact (the residuals are flat in it between data points), so the start must be close."""
-    approach = np.ones(c.size, bool) if retract is None else ~retract
-    c, F = c[approach], F[approach]
+    contact (the residuals are flat in it between data points), so the start must be close.
+    Binned points: the first point above is the bin astride contact, and the start is where
+    its share of the next point's force puts contact within its range [low, high]."""
+    approach = np.ones(data.compression.size, bool) if data.retract is None else ~data.retract
+    c, F, low, high = (a[approach] for a in (data.compression, data.force, data.low, data.high))
     before = c < 0
     if before.sum() < 5:
         return 0.0
@@ -226,6 +180,9 @@ def _contact_start(c, F, retract, parameter: Parameter) -> float:
         return 0.0
     k = int(leaves[0])
     guess = 0.5 * (c[k] + c[k - 1]) if k > 0 else float(c[k])
+    if high[k] > low[k]:  # a bin: the fraction of it in contact from the next point's force
+        share = (F[k] - base) / (F[k + 1] - base) if k + 1 < c.size and F[k + 1] - base > 0 else 0.5
+        guess = float(high[k] - np.clip(share, 0.05, 0.95) * (high[k] - low[k]))
     lo, hi = parameter.lower, parameter.upper
     span = (hi - lo) if lo is not None and hi is not None else 1.0
     return float(np.clip(guess, (lo if lo is not None else -np.inf) + 1e-3 * span,
@@ -302,7 +259,8 @@ def fit_problem(curve, model="unit-mesh", *, free=("EI",), fixed=None, initial=N
         raise ValueError(f"max_points must be an integer of at least 3, got {max_points!r}")
     model = make_fit_model(model, **(model_options or {}))
     free = tuple(n.strip() for n in free.split(",")) if isinstance(free, str) else tuple(free)
-    c, F, retract = _data(curve, branch, int(max_points), min_compression)
+    data = fit_data(curve, branch, int(max_points), min_compression)
+    c, F, retract = data.compression, data.force, data.retract
     bounds = dict(bounds or {})
     # a free contact shift moves the contact point within the data's own range: beyond it the
     # model would be sampled past the data (or entirely before contact) and the fit is degenerate
@@ -312,7 +270,7 @@ def fit_problem(curve, model="unit-mesh", *, free=("EI",), fixed=None, initial=N
         bounds["contact_point"] = (-0.1 * float(c.max()), 0.5 * float(c.max()))
     table, free, fixed, start = parameter_table(model, free, fixed, initial, bounds)
     if "contact_point" in free and "contact_point" not in (initial or {}):
-        start["contact_point"] = _contact_start(c, F, retract, table["contact_point"])
+        start["contact_point"] = _contact_start(data, table["contact_point"])
     check_identifiable(model, free, fixed)
     shift = contact_shift({**start, **fixed})
     room = max(0.0, table["contact_offset"].upper or 0.0) if "contact_offset" in free else 0.0
@@ -335,16 +293,18 @@ def fit_problem(curve, model="unit-mesh", *, free=("EI",), fixed=None, initial=N
     # Points before contact at every allowed contact shift have model force 0 whatever the
     # values: only the others are sent to the model (a real curve's long approach costs no
     # equilibria).  All points when a free contact term has an open bound.
-    touch = np.flatnonzero(c + _largest_shift(table, free, fixed) > 0)
+    touch = np.flatnonzero(data.high + _largest_shift(table, free, fixed) > 0)
     touch = touch if touch.size else np.arange(c.size)
     sub_retract = None if retract is None else np.asarray(retract, bool)[touch]
 
     def residuals(z, throw: bool = False):
         values = to_values(z)
-        u = c_j[touch] + contact_shift(values)
+        shift = contact_shift(values)
+        u = bin_evaluation_points(data, shift)[touch]
         sampled, ok = model.probe_force(values, u, reach=reach, retract=sub_retract, method=method, settings=path,
                                         throw=throw)
-        force = jnp.zeros(c.size, sampled.dtype).at[touch].set(sampled)
+        # a binned point is the mean over its bin: the bin astride contact is partly at zero force
+        force = bin_mean_force(data, shift, jnp.zeros(c.size, sampled.dtype).at[touch].set(sampled))
         # a path that fails at these values, or whose nodes cross the surface (not physical: no
         # contact model), gives NaN residuals: the optimiser rejects the step
         return jnp.where(ok, (data_terms(values, force, c_j) - F_j) / sigma_j, jnp.nan)
@@ -357,7 +317,8 @@ def fit_problem(curve, model="unit-mesh", *, free=("EI",), fixed=None, initial=N
 
     z0 = jnp.asarray([table[n].to_z(start[n]) for n in free])
     return FitProblem(residuals=residuals, to_values=to_values, z0=z0, free=free, fixed=fixed, compression=c, force=F,
-                      sigma=sigma, table=table, model=model, reach=reach, path=full_path, retract=retract)
+                      sigma=sigma, table=table, model=model, reach=reach, path=full_path, retract=retract,
+                      data=data)
 
 
 # ----------------------------------------------------------------- the start of a fit

@@ -3,7 +3,9 @@
 :func:`goodness_of_fit` judges a fitted force curve (points, data and model force in pN):
 
 * **Noise** σ̂ (pN) of the fitted points, in this order of preference: the non-contact
-  baseline (points before contact, at least ``MIN_BASELINE_POINTS`` = 8), by
+  baseline (at least ``MIN_BASELINE_POINTS`` = 8 points before contact: the fitted ones and,
+  when the fit cropped a longer approach away, the cropped ones, averaged in bins of the
+  fitted points' width — a real curve's whole approach, not only the window's quarter), by
   :func:`estimate_noise` — ``noise_source`` "baseline"; else the user's ``sigma`` (its rms) —
   "sigma"; else :func:`estimate_noise` of the fit's own residuals over all points —
   "residuals" (then χ² is not a test: the noise was taken from the misfit itself).
@@ -188,18 +190,24 @@ class Goodness:
         return out
 
 
-def _noise(force, residual_pN, baseline, sigma, groups):
-    """(noise, source, n_baseline, dof, notes)."""
-    n_b = int(np.sum(baseline))
+def _noise(force, residual_pN, baseline, sigma, groups, extra):
+    """(noise, source, n_baseline, dof, notes); ``extra`` = (force [k], groups [k]) of
+    baseline points that are not fitted."""
+    f_b, g_b = force[baseline], np.unique(groups, return_inverse=True)[1][baseline]
+    if extra is not None:  # the cropped points are their own groups: no difference spans the crop
+        f_e, g_e = (np.asarray(a).ravel() for a in extra)
+        f_b = np.concatenate([np.asarray(f_e, float), f_b])
+        g_b = np.concatenate([np.unique(g_e, return_inverse=True)[1] + g_b.max(initial=0) + 1, g_b])
+    n_b = int(f_b.size)
     notes = []
     if n_b >= MIN_BASELINE_POINTS:
-        noise = estimate_noise(force[baseline], groups[baseline])
+        noise = estimate_noise(f_b, g_b)
         if math.isfinite(noise) and noise > 0:
             return noise, "baseline", n_b, NOISE_DOF_PER_POINT * (n_b - 1), notes
         notes.append(f"the {n_b} baseline points show no measurable noise (quantised or noise-free data)")
     else:
-        notes.append(f"{n_b} fitted points before contact, too few for a noise estimate from the baseline (it needs "
-                     f"{MIN_BASELINE_POINTS}: fit more of the approach before contact)")
+        notes.append(f"{n_b} points before contact, too few for a noise estimate from the baseline (it needs "
+                     f"{MIN_BASELINE_POINTS}: fit more of the approach before contact, or give the whole approach)")
     if sigma is not None:
         return float(np.sqrt(np.mean(np.square(sigma)))), "sigma", n_b, math.inf, []
     notes.append("the noise level is estimated from the fit's own residuals, so χ² is not a test of the model "
@@ -218,7 +226,7 @@ def _chi2_p(chi2: float, dof: int, noise_dof: float) -> float:
 
 
 def goodness_of_fit(compression, force, model_force, n_parameters: int, *, sigma=None, baseline=None,
-                    contact=None, groups=None) -> Goodness:
+                    contact=None, groups=None, extra_baseline=None) -> Goodness:
     """Judge a fit: noise, χ², runs test, autocorrelation, AIC/BIC and the misfit verdict.
 
     compression (µm), force (pN), model_force (pN) : [m] the fitted points, data and model.
@@ -227,6 +235,9 @@ def goodness_of_fit(compression, force, model_force, n_parameters: int, *, sigma
     baseline : [m] bool, the points before contact (default compression < 0); contact : [m]
         bool, the points in contact (default compression > 0).
     groups : [m] labels of the branches (e.g. True for retract points) when several are fitted.
+    extra_baseline : None, or (force [k] pN, groups [k]) of non-contact points that are not
+        fitted (e.g. the approach before the fitted window, in increasing compression per
+        group, binned like the fitted points): they join the noise estimate.
     Points are taken in order of compression within each group (the noise estimate uses
     differences within a group only).  Returns a :class:`Goodness`.
     """
@@ -242,7 +253,7 @@ def goodness_of_fit(compression, force, model_force, n_parameters: int, *, sigma
     s = None if s is None else s[order]
     r = fm - f
     m, p = int(c.size), int(n_parameters)
-    noise, source, n_b, noise_dof, notes = _noise(f, r, baseline, s, groups)
+    noise, source, n_b, noise_dof, notes = _noise(f, r, baseline, s, groups, extra_baseline)
     scale = s if source == "sigma" else noise
     with np.errstate(divide="ignore", invalid="ignore"):
         chi2 = float(np.sum((r / scale) ** 2)) if np.all(np.asarray(scale) > 0) else math.inf
@@ -275,9 +286,17 @@ def judge_fit(problem, values: dict, r: np.ndarray, sigma_given: bool) -> Goodne
     """:func:`goodness_of_fit` of a fit's points (a :class:`socbjax.FitProblem`, the fitted
     ``values``, residuals ``r`` in pN): before contact are the points with c < 0 and
     c + shift < 0, in contact those with c + shift > 0 (shift = contact_offset − contact_point,
-    µm); approach and retract points (``problem.retract``) are separate groups."""
+    µm); approach and retract points (``problem.retract``) are separate groups.  The points
+    cropped before the window (``problem.data.baseline``) that are before contact by the same rule
+    join the noise estimate."""
     c = np.asarray(problem.compression, float)
-    shifted = c + float(contact_shift(values))
+    shift = float(contact_shift(values))
+    shifted = c + shift
+    extra, data = None, getattr(problem, "data", None)
+    cropped = None if data is None else data.baseline
+    if cropped is not None:
+        before = (cropped.compression < 0) & (cropped.compression + shift < 0)
+        extra = (cropped.force[before], cropped.retract[before])
     return goodness_of_fit(c, problem.force, problem.force + r, len(problem.free),
                            sigma=problem.sigma if sigma_given else None, baseline=(c < 0) & (shifted < 0),
-                           contact=shifted > 0, groups=getattr(problem, "retract", None))
+                           contact=shifted > 0, groups=getattr(problem, "retract", None), extra_baseline=extra)

@@ -285,3 +285,61 @@ def test_contact_point_start_ignores_a_noise_spike_in_the_baseline():
     result = sj.fit((c, F), model, free=("EI", "contact_point", "baseline"))
     assert abs(result.values["contact_point"] - truth) <= spacing
     assert result.values["EI"] == pytest.approx(0.071, rel=0.02)
+
+
+def test_the_cropped_approach_enters_the_noise_estimate():
+    """A measured curve's approach reaches far before the fitted window (−¼ of the largest
+    compression): the cropped points are kept in ``FitProblem.baseline``, averaged in bins of
+    the fitted points' width (4 raw points each here), so their noise is that of a fitted
+    point (σ/2), and the fit's noise estimate uses them (ν grows from ~1 to ~30); arrays
+    cropped by ``min_compression`` keep their raw cropped points."""
+    model = ColumnModel(4, supports=("pinned", "pinned"), dim=2)
+    c = np.round(np.arange(-1.0, 0.2 + 1e-9, 0.0025), 10)  # µm, raw spacing 2.5 nm
+    sigma = 0.05  # pN per raw point
+    clean = np.zeros(c.size)
+    touch = c > 0
+    clean[touch] = _synthetic(model, {"EI": 0.071}, c[touch], seed=0, noise=0.0)
+    F = clean + sigma * np.random.default_rng(3).standard_normal(c.size)
+    curve = sj.ForceCurve(c, F)
+    problem = sj.fit_problem(curve, model, free=("EI",), max_points=25)
+    window = curve.select(min_compression=-0.05)
+    width = (window.compression.max() - window.compression.min()) / 25
+    base = problem.data.baseline
+    assert isinstance(base, sj.ApproachBaseline) and not base.retract.any()
+    assert base.compression.max() < -0.05 and base.compression.min() < -0.9
+    assert np.mean(np.diff(base.compression)) == pytest.approx(width, rel=0.01)
+    n = base.force.size
+    assert sj.estimate_noise(base.force) == pytest.approx(sigma / 2, rel=3 / np.sqrt(2 * 0.3 * n))
+    result = sj.fit(curve, model, free=("EI", "contact_point"), settings=sj.FitSettings(max_points=25))
+    in_window = int(np.sum(problem.compression < 0))
+    assert result.goodness["n_baseline"] == n + in_window and in_window < 8 < n
+    assert result.noise_source == "baseline"
+    assert result.noise == pytest.approx(sigma / 2, rel=3 / np.sqrt(2 * 0.3 * n))
+    assert result.values["EI"] == pytest.approx(0.071, rel=0.02) and not result.misfit
+    assert abs(result.values["contact_point"]) < 0.0025  # the raw spacing
+    arrays = sj.fit_problem((c, F), model, free=("EI",), min_compression=-0.05)
+    np.testing.assert_array_equal(arrays.data.baseline.force, F[c < -0.05])
+    assert sj.fit_problem((c[c >= -0.05], F[c >= -0.05]), model, free=("EI",)).data.baseline is None
+
+
+def test_a_binned_point_astride_contact_is_the_mean_over_its_bin():
+    """The force of inextensible filaments jumps at contact, so the bin that holds the contact
+    point averages raw points at zero force and in contact: the residuals compare each binned
+    point with the model's mean over its bin's raw points (reference: the model at every raw
+    point, binned like the data).  That mean is a staircase in the contact point (a step per
+    raw point crossing), which the residuals follow linearly: exact (1 % of the jump) with
+    contact midway between raw points, within half a step (jump / 2k, k = 4 raw points per
+    bin) elsewhere; the model at the bin's mean compression is off by a fifth of the jump."""
+    model = ColumnModel(4, supports=("pinned", "pinned"), dim=2)
+    c = np.round(np.arange(-0.05, 0.2 + 1e-9, 0.0025), 10)  # µm, 101 raw points, 4 per bin
+    F = np.zeros(c.size)  # the data do not matter: residuals plus data are the model's bin means
+    problem = sj.fit_problem(sj.ForceCurve(c, F), model, free=("EI", "contact_point"), max_points=25)
+    for contact, tolerance in ((0.00375, 0.01), (0.00375 + 0.0008, 0.125)):  # a raw midpoint, and not
+        values = {"EI": 0.071, "contact_point": contact}
+        z = np.array([problem.table[n].to_z(values[n]) for n in problem.free])
+        binned_model = np.asarray(problem.residuals(z)) + problem.force
+        raw = np.asarray(model.predict(values, c, reach=problem.reach))
+        reference = sj.ForceCurve(c, raw).binned(25).force
+        np.testing.assert_allclose(binned_model, reference, atol=tolerance * raw.max())
+    at_means = np.asarray(model.predict(values, problem.compression, reach=problem.reach))
+    assert np.max(np.abs(at_means - reference)) > 0.2 * raw.max()
