@@ -105,16 +105,6 @@ def _baseline(parts, retract_flags) -> ApproachBaseline | None:
     return ApproachBaseline(*(np.concatenate(a) for a in zip(*parts, strict=True)))
 
 
-def _bin_means(c, F, upper: float, width: float):
-    """Means of (c, F) in bins of ``width`` (µm) counted down from ``upper``; bins with fewer
-    than ¾ of the median count (the ragged far end) are dropped: their noise would differ."""
-    idx = np.floor((upper - c) / width).astype(int)
-    idx -= idx.min()
-    counts = np.bincount(idx)
-    keep = np.flatnonzero(counts >= max(1.0, 0.75 * np.median(counts[counts > 0])))[::-1]  # increasing compression
-    return np.bincount(idx, c)[keep] / counts[keep], np.bincount(idx, F)[keep] / counts[keep]
-
-
 def _bin_ranges(c_raw: np.ndarray, c_mean: np.ndarray, n_bins: int):
     """(low, high) [m] (µm) of the bins of :meth:`ForceCurve.binned` holding the means
     ``c_mean``: the span of each bin's raw points widened by half the raw spacing on each side
@@ -172,8 +162,14 @@ def _curve_branch(curve: ForceCurve, branch: str, max_points: int, min_compressi
     binned = len(part) > max_points
     if binned:
         part = part.binned(max_points)
-        if c_out.size:
-            c_out, F_out = _bin_means(c_out, F_out, low, (c_raw.max() - c_raw.min()) / max_points)
+        # the cropped approach in bins of (nearly) the fitted points' width; shorter than 3 bins,
+        # it is dropped (its raw points would carry a raw point's noise, not a bin's)
+        n_bins = round(float(np.ptp(c_out)) * max_points / (c_raw.max() - c_raw.min())) if c_out.size >= 3 else 0
+        if n_bins >= 3:
+            cropped = ForceCurve(c_out, F_out).binned(n_bins)
+            c_out, F_out = np.asarray(cropped.compression, float), np.asarray(cropped.force, float)
+        else:
+            c_out, F_out = c_out[:0], F_out[:0]
     c, F = np.asarray(part.compression, float), np.asarray(part.force, float)
     _check_branch(c, branch)
     return c, F, (_bin_ranges(c_raw, c, max_points) if binned else (c, c)), (c_out, F_out)
