@@ -167,7 +167,8 @@ class ForceCurve:
         The curve's compression range is cut into ``n_bins`` equal bins; each segment gets at
         most ``n_bins`` points (empty bins skipped), the approach in increasing and the
         retract in decreasing compression.  ``metadata["bin_counts"]`` holds how many points
-        each output point averages (fit weights).
+        each output point averages (fit weights), ``metadata["bin_span"]`` the [first, last]
+        compression (µm) of those points.
         """
         if not isinstance(n_bins, numbers.Integral) or n_bins < 3:
             raise ValueError(f"n_bins must be an integer >= 3, got {n_bins!r}")
@@ -179,12 +180,15 @@ class ForceCurve:
                 idx = np.clip(np.searchsorted(edges, c, side="right") - 1, 0, n_bins - 1)
                 counts = np.bincount(idx, minlength=n_bins)
                 keep = np.flatnonzero(counts)[:: 1 if s == 0 else -1]
+                first, last = np.full(n_bins, np.inf), np.full(n_bins, -np.inf)
+                np.minimum.at(first, idx, c)
+                np.maximum.at(last, idx, c)
                 parts.append((np.bincount(idx, c, n_bins)[keep] / counts[keep],
                               np.bincount(idx, f, n_bins)[keep] / counts[keep],
-                              np.full(keep.size, s, np.int8), counts[keep]))
-        comp, force, seg, counts = (np.concatenate(p) for p in zip(*parts, strict=True))
+                              np.full(keep.size, s, np.int8), counts[keep], np.stack([first[keep], last[keep]], 1)))
+        comp, force, seg, counts, span = (np.concatenate(p) for p in zip(*parts, strict=True))
         return ForceCurve(comp, force, seg, {**self.metadata, "binned": int(n_bins),
-                                             "bin_counts": counts.tolist()})
+                                             "bin_counts": counts.tolist(), "bin_span": span.tolist()})
 
 
 def _spring(k: Any, source: str) -> float:

@@ -105,21 +105,13 @@ def _baseline(parts, retract_flags) -> ApproachBaseline | None:
     return ApproachBaseline(*(np.concatenate(a) for a in zip(*parts, strict=True)))
 
 
-def _bin_ranges(c_raw: np.ndarray, c_mean: np.ndarray, n_bins: int):
-    """(low, high) [m] (µm) of the bins of :meth:`ForceCurve.binned` holding the means
-    ``c_mean``: the span of each bin's raw points widened by half the raw spacing on each side
-    (the compression each raw point stands for)."""
-    edges = np.linspace(c_raw.min(), c_raw.max(), n_bins + 1)
-
-    def bin_of(x):
-        return np.clip(np.searchsorted(edges, x, side="right") - 1, 0, n_bins - 1)
-
-    idx, k = bin_of(c_raw), bin_of(c_mean)
-    first, last = np.full(n_bins, np.inf), np.full(n_bins, -np.inf)
-    np.minimum.at(first, idx, c_raw)
-    np.maximum.at(last, idx, c_raw)
+def _bin_ranges(c_raw: np.ndarray, binned: ForceCurve):
+    """(low, high) [m] (µm) of the points of ``binned`` (:meth:`ForceCurve.binned` of raw
+    compressions ``c_raw``): the span of each bin's raw points widened by half the raw spacing
+    on each side (the compression each raw point stands for)."""
+    span = np.asarray(binned.metadata["bin_span"], float)
     half = 0.5 * float(np.median(np.diff(np.sort(c_raw))))
-    return first[k] - half, last[k] + half
+    return span[:, 0] - half, span[:, 1] + half
 
 
 def _branch_data(curve, branch: str, max_points: int, min_compression):
@@ -172,7 +164,7 @@ def _curve_branch(curve: ForceCurve, branch: str, max_points: int, min_compressi
             c_out, F_out = c_out[:0], F_out[:0]
     c, F = np.asarray(part.compression, float), np.asarray(part.force, float)
     _check_branch(c, branch)
-    return c, F, (_bin_ranges(c_raw, c, max_points) if binned else (c, c)), (c_out, F_out)
+    return c, F, (_bin_ranges(c_raw, part) if binned else (c, c)), (c_out, F_out)
 
 
 def _check_branch(c: np.ndarray, branch: str) -> None:

@@ -175,6 +175,13 @@ def test_binned_preserves_means_and_bin_count():
     assert b.compression.min() >= comp.min() and b.compression.max() <= comp.max()
     assert np.abs(b.force - b.compression**2).max() < 0.2  # bins are narrow (width 0.03)
     assert b.metadata["source"] == "x" and len(curve.approach.binned(7)) <= 7
+    # each point's span: the first and last raw compression of its bin (bins of width 0.03)
+    span = np.asarray(b.metadata["bin_span"])
+    edges = np.linspace(comp.min(), comp.max(), 101)
+    for (first, last), s, c in zip(span, b.segment, b.compression, strict=True):
+        k = min(np.searchsorted(edges, c, side="right") - 1, 99)
+        inside = comp[(seg == s) & (comp >= edges[k]) & ((comp < edges[k + 1]) | (k == 99))]
+        assert (first, last) == (inside.min(), inside.max())
     with pytest.raises(ValueError, match="n_bins"):
         curve.binned(2)
 
