@@ -20,6 +20,7 @@ from ._cache import enable_compilation_cache  # noqa: E402
 from ._compare import ModelComparison, compare_models  # noqa: E402
 from ._compress import compress  # noqa: E402
 from ._curve import FilamentCurve  # noqa: E402
+from ._curved import arc, crimped_fibre, with_natural_curvature  # noqa: E402
 from ._dendritic import dendritic_outcrop, unit_dendritic_mesh  # noqa: E402
 from ._ensemble import EnsembleResult, compress_ensemble  # noqa: E402
 from ._equilibrium import Solution  # noqa: E402
@@ -50,6 +51,7 @@ from ._protocol import Checkpoint  # noqa: E402
 from ._quadrature import coupling_matrix, gauss_legendre, quintic_coefficients  # noqa: E402
 from ._residual import Control, SOCBModel, SOCBState  # noqa: E402
 from ._result import PHASES, CompressionResult, LimitPoint  # noqa: E402
+from ._thermal import persistence_length, thermal_network  # noqa: E402
 from ._root import DampedNewton  # noqa: E402
 from ._solution import RESULTS, ConvergenceError  # noqa: E402
 from ._solve import MODELS, default_atol, make_model, solve  # noqa: E402

@@ -69,8 +69,9 @@ def _smooth(network, tangents, moments, forces, sigma):
     a, b = seg[:, 0], seg[:, 1]
     if network.dim == 2:
         theta_a, theta_b = _segment_angles(tangents, seg)
-        theta, dtheta = jax.vmap(planar_segment_curve, in_axes=(0,) * 7 + (None, None))(
-            theta_a, moments[a], theta_b, moments[b], forces, network.lengths, network.EI, basis, dbasis)
+        theta, dtheta = jax.vmap(planar_segment_curve, in_axes=(0,) * 7 + (None, None, 0))(
+            theta_a, moments[a], theta_b, moments[b], forces, network.lengths, network.EI, basis, dbasis,
+            network.natural_curvature)
         t = jnp.stack([jnp.cos(theta), jnp.sin(theta)], axis=-1)
         dt = dtheta[..., None] * jnp.stack([-jnp.sin(theta), jnp.cos(theta)], axis=-1)
         return t, dt

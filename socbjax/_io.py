@@ -2,22 +2,22 @@
 checkpoints of long runs (:func:`save_checkpoint` / :func:`load_checkpoint`), atomic writes
 (:func:`atomic_path`), output checks (:func:`check_output_path`) and :func:`output_lock`.
 
-Layout of a result file (``format = "socbjax.compression"``, ``format_version = 2``)::
+Layout of a result file (``format = "socbjax.compression"``, ``format_version = 3``)::
 
     /                 attrs: format, format_version, socbjax_version, created (UTC, ISO 8601),
                              result (name of a socbjax.RESULTS item; format 1: integer
                              status), parameters (JSON object)
     /path/<field>     one dataset per array field of the result (displacement, force, ...)
     /limit_points/    parallel datasets kind, step, displacement, force, phase
-    /network/<field>  one dataset per value (positions, ..., couples) and per topology array of
-                      the Network (segments, position_projector, ...); attr dim
+    /network/<field>  one dataset per value (positions, ..., couples, natural_curvature: format
+                      3) and per topology array of the Network (segments, ...); attr dim
     /units            attrs: field -> unit (µm, pN, pN·µm, ...); datasets also carry "units"
 
 A checkpoint (``format = "socbjax.checkpoint"``) holds ``/arrays/0``, ``/arrays/1``, ... with
 their names as a JSON list in the attribute ``names`` of ``/arrays`` and ``meta`` (a JSON
 object) on the root.  Files are written in the HDF5 1.10 file format (checksummed metadata)
 with fixed-length UTF-8 strings, which h5py reads as ``bytes``; files of earlier socbjax
-(variable-length strings, older HDF5 formats, format_version 1) still load.
+(variable-length strings, older HDF5 formats, format_version 1 and 2) still load.
 
 Reading treats every file as untrusted, since result files are shared.  Before any data is
 read the whole file is checked (:mod:`socbjax._hdf5`): only hard links (soft and external
@@ -102,6 +102,7 @@ UNITS = {
     "network/positions": "µm",
     "network/tangents": "1",
     "network/lengths": "µm",
+    "network/natural_curvature": "1/µm",
     "network/EI": "pN·µm²",
     "network/loads": "pN",
     "network/couples": "pN·µm",

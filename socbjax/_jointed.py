@@ -10,7 +10,10 @@ moment at a joint is the spring law of Eq. 4, m = EI Δθ / l:
 * clamped end: the first bar's direction stands for the tangent at its midpoint, half a bar
   from the clamp, so the clamp spring is k = 2 EI / l (the consistent discrete elastica,
   second-order accurate; with EI/l at the clamp the model converges only at first order);
-* free and pinned ends: no spring.
+* free and pinned ends: no spring;
+* 2D natural curvature κ₀: each bar is the chord of an arc turning by κ₀l at rest, so a
+  spring's rest angle is the sum of the half-turns of the bars on either side of it (a
+  clamp's: the half-turn of its bar); the springs act on the angle minus the rest angle.
 
 rot(a → b) is the rotation angle (2D, signed) or rotation vector (3D) from a to b.
 Equations: per bar, r_b − r_a = l d (d rows), moment balance of the bar
@@ -71,7 +74,11 @@ def joint_moments(state: JointedState, network: Network):
     clamp = 2.0 / jnp.where(has_p, compliance[p_safe], compliance[q_safe])
     k = jnp.where(has_p & has_q, interior, jnp.where(network.clamped, clamp, 0.0))
     rot = _rotation(network, d_in, d_out)
-    return k[:, None] * rot if network.dim == 3 else k * rot
+    if network.dim == 3:
+        return k[:, None] * rot
+    half_turn = 0.5 * network.natural_curvature * network.lengths
+    rest = jnp.where(has_p, half_turn[p_safe], 0.0) + jnp.where(has_q, half_turn[q_safe], 0.0)
+    return k * (rot - rest)
 
 
 class JointedModel(eqx.Module):
@@ -94,7 +101,8 @@ class JointedModel(eqx.Module):
     def initial_state(self) -> JointedState:
         net = self.network
         t = net.tangents[net.segments[:, 0]]
-        directions = jnp.arctan2(t[:, 1], t[:, 0]) if net.dim == 2 else t
+        # 2D: the chord of a naturally curved segment lies at half its turn from the start tangent
+        directions = jnp.arctan2(t[:, 1], t[:, 0]) + 0.5 * net.natural_curvature * net.lengths if net.dim == 2 else t
         return JointedState(net.positions, directions, jnp.zeros((net.n_segments, net.dim)))
 
     def frames(self, state: JointedState):

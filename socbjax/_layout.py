@@ -31,7 +31,7 @@ from ._version import __version__
 __all__ = ["CHECKPOINT_FORMAT", "FORMAT_VERSION", "MAX_MAGNITUDE", "PATH_FIELDS", "RESULT_FORMAT", "limit_point_kind",
            "open_file", "read_checkpoint", "read_result"]
 
-FORMAT_VERSION = 2  # 2: result name (RESULTS), network couples and topology; 1 still readable
+FORMAT_VERSION = 3  # 3: natural curvature; 2: result name (RESULTS), couples, topology; 1 and 2 still readable
 RESULT_FORMAT = "socbjax.compression"
 CHECKPOINT_FORMAT = "socbjax.checkpoint"
 # Limit-point kinds are open-ended (force_maximum, fold, surface_crossing, ...): any identifier
@@ -47,12 +47,12 @@ _PATH_LAYOUT = {
 PATH_FIELDS = tuple(_PATH_LAYOUT)
 _NETWORK_LAYOUT = {
     "positions": ("f", "Nd"), "segments": ("iu", "S2"), "tangents": ("f", "Nd"), "lengths": ("f", "S"),
-    "EI": ("f", "S"), "loads": ("f", "Nd"), "couples": ("f", "Nm"), "position_projector": ("f", "Ndd"),
+    "EI": ("f", "S"), "loads": ("f", "Nd"), "couples": ("f", "Nm"), "natural_curvature": ("f", "Sm"), "position_projector": ("f", "Ndd"),
     "clamped": ("b", "N"), "moment_free": ("b", "N"), "attach": ("iu", "N"), "transfer_segment": ("iu", "N"),
     "leaving_segment": ("iu", "N"), "probe": ("b", "N"), "probe_direction": ("f", "d"), "strand": ("iu", "S"),
     "socb_rows": ("iu", "R"),
 }
-_FORMAT_1_OPTIONAL = ("couples", "leaving_segment")  # format 1 had neither
+_OPTIONAL = {1: ("couples", "leaving_segment", "natural_curvature"), 2: ("natural_curvature",)}  # absent before
 _KIND_NAMES = {"f": "float32/float64", "b": "bool", "iu": "integer", "s": "string"}
 _LIMIT_DTYPES = {"str": "s", "int": "iu", "float": "f"}  # dtype kinds of the LimitPoint fields
 
@@ -146,7 +146,7 @@ def _read_network(reader: Reader, version: int) -> tuple[Network, _Sizes]:
     if dim not in (2, 3):
         raise InvalidFile(f"the attribute dim of /network is {dim!r}; networks are 2- or 3-dimensional (2 or 3)")
     sizes = _Sizes(dim)
-    a = _read_group(reader, sizes, "network", _NETWORK_LAYOUT, _FORMAT_1_OPTIONAL if version == 1 else ())
+    a = _read_group(reader, sizes, "network", _NETWORK_LAYOUT, _OPTIONAL.get(version, ()))
     n, s = sizes.known["N"][0], sizes.known["S"][0]
     if n < 2 or s < 1:
         raise InvalidFile(f"/network has {n} nodes and {s} segments; a network has at least 2 nodes and 1 segment")
@@ -164,6 +164,7 @@ def _read_network(reader: Reader, version: int) -> tuple[Network, _Sizes]:
         _check_range(f"/network/{name}", a[name], s + 1, f"segment indices, {s} for none")
     _check_range("/network/socb_rows", a["socb_rows"], n * (4 if dim == 2 else 11), "node equation rows")
     a.setdefault("couples", np.zeros((n,) if dim == 2 else (n, 3)))
+    a.setdefault("natural_curvature", np.zeros((s,) if dim == 2 else (s, 3)))
     values = {name: jnp.asarray(a.pop(name)) for name in DIFFERENTIABLE_FIELDS}
     return Network(**values, topology=Topology(dim=dim, **a)), sizes
 

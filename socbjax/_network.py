@@ -44,6 +44,7 @@ from ._junction import check_junction_geometry, check_junctions, transfer_segmen
 from ._network_checks import (
     check_degrees,
     check_loops,
+    check_natural_curvature,
     check_reference_state,
     check_segments,
     check_supported,
@@ -59,7 +60,7 @@ from ._network_checks import (
 __all__ = ["DIFFERENTIABLE_FIELDS", "Network", "Padding", "Topology", "add_direction", "is_traced", "make_network"]
 
 # Network arrays that carry values (traced, differentiable); everything else is topology.
-DIFFERENTIABLE_FIELDS = ("positions", "tangents", "lengths", "EI", "loads", "couples")
+DIFFERENTIABLE_FIELDS = ("positions", "tangents", "lengths", "EI", "loads", "couples", "natural_curvature")
 _STRUCTURE = ("segments", "position_projector", "clamped", "moment_free", "attach", "transfer_segment",
               "leaving_segment", "probe", "probe_direction", "strand", "socb_rows")
 _DTYPES = {"position_projector": np.float64, "probe_direction": np.float64, "clamped": np.bool_, "moment_free": np.bool_,
@@ -142,6 +143,9 @@ class Network(eqx.Module):
     EI : [S] bending stiffness per segment (pN·µm²).
     loads : [N, d] fixed external nodal forces (pN), e.g. a lateral perturbation.
     couples : 2D [N], 3D [N, 3] fixed external nodal couples (pN·µm).
+    natural_curvature : 2D [S] curvature of each segment at rest (1/µm; each segment is a
+        circular arc when unloaded, 0: straight); 3D [S, 3], zero (3D filaments are
+        naturally straight until twist is modelled).
     topology : the static structure (``segments``, supports, junctions, probe, ...), whose
         arrays are also available as read-only numpy attributes of the network.
     padding : None, or the :class:`Padding` of a realisation padded to a common topology
@@ -154,6 +158,7 @@ class Network(eqx.Module):
     EI: Float[Array, " S"]
     loads: Float[Array, "N d"]
     couples: Array
+    natural_curvature: Array
     topology: Topology = eqx.field(static=True)
     padding: Padding | None = None
 
@@ -255,7 +260,8 @@ def _shapes(positions) -> tuple[int, int]:
 
 
 def make_network(positions, tangents, segments, lengths, EI, *, fixed_directions=None, clamped=None, attach=None,
-                 probe=None, probe_direction=None, loads=None, couples=None, strand=None) -> Network:
+                 probe=None, probe_direction=None, loads=None, couples=None, strand=None,
+                 natural_curvature=None) -> Network:
     """Build and validate a :class:`Network`.
 
     Parameters
@@ -274,14 +280,18 @@ def make_network(positions, tangents, segments, lengths, EI, *, fixed_directions
         the other supported nodes, else −x).
     loads : [N, d] fixed external nodal forces (pN); couples : 2D [N] / 3D [N, 3] fixed
         external nodal couples (pN·µm).  strand : [S] non-negative integer strand ids.
+    natural_curvature : 2D [S] or scalar, each segment's curvature at rest (1/µm, positive:
+        turning counter-clockwise; default 0, straight).  3D: [S, 3], zero only.
 
-    ``positions``, ``tangents``, ``lengths``, ``EI``, ``loads`` and ``couples`` may be JAX
-    arrays or tracers (inside ``jax.jit``, ``jax.grad``, ``jax.vmap``): they become the
-    network's traced values, and the checks that need their values are then skipped.
-    Everything else is topology and must be concrete.  With concrete values the reference
-    state must be straight and stress-free (relative tolerance 1e-6, see
-    :mod:`socbjax._network_checks`): unit tangents (normalised when within the tolerance),
-    each segment as long as its chord with the tangents at both its nodes along the chord,
+    ``positions``, ``tangents``, ``lengths``, ``EI``, ``loads``, ``couples`` and
+    ``natural_curvature`` may be JAX arrays or tracers (inside ``jax.jit``, ``jax.grad``,
+    ``jax.vmap``): they become the network's traced values, and the checks that need their
+    values are then skipped.  Everything else is topology and must be concrete.  With
+    concrete values the reference state must be the stress-free one (relative tolerance
+    1e-6, see :mod:`socbjax._network_checks`): unit tangents (normalised when within the
+    tolerance), each segment a straight piece as long as its chord with the tangents at
+    both its nodes along the chord, or with natural curvature κ₀ an arc of that length
+    (chord 2 sin(κ₀l/2)/κ₀, end tangents at ∓κ₀l/2 from the chord, κ₀l < π),
     no coincident end nodes, daughter bases at their mother nodes.  Segments and junctions
     must form no closed loop, and every piece must be held against rigid-body motion.
     Moment-free ends are derived: nodes with one segment that are neither clamped nor
@@ -298,6 +308,9 @@ def make_network(positions, tangents, segments, lengths, EI, *, fixed_directions
     EI, _ = network_value("EI", EI, (s,), "pN·µm²", positive=True)
     loads, _ = network_value("loads", loads, (n, dim), "pN")
     couples, _ = network_value("couples", couples, (n,) if dim == 2 else (n, 3), "pN·µm")
+    natural_curvature, kappa_np = network_value("natural_curvature", natural_curvature, (s,) if dim == 2 else (s, 3),
+                                                "1/µm")
+    turn = check_natural_curvature(kappa_np, len_np, dim)
     if tan_np is not None:
         tangents = tan_np = unit_tangents(tan_np)
     n_start, n_end = check_degrees(seg, n)
@@ -315,7 +328,7 @@ def make_network(positions, tangents, segments, lengths, EI, *, fixed_directions
     attach_arr = check_junctions(concrete_structure("attach", attach), n, degree, n_end, n_start, clamped, fixed_any,
                                  probe_nodes)
     roots = check_loops(n, seg, attach_arr)
-    check_reference_state(pos_np, tan_np, seg, len_np)
+    check_reference_state(pos_np, tan_np, seg, len_np, turn)
     check_junction_geometry(attach_arr, pos_np, tan_np, len_np)
     attached = attach_arr != np.arange(n)
     check_supported(roots, clamped, projector, dim)
@@ -330,7 +343,7 @@ def make_network(positions, tangents, segments, lengths, EI, *, fixed_directions
         strand=strand, socb_rows=_socb_rows(dim, clamped | attached, moment_free),
     )
     return Network(positions=positions, tangents=tangents, lengths=lengths, EI=EI, loads=loads, couples=couples,
-                   topology=topology)
+                   natural_curvature=natural_curvature, topology=topology)
 
 
 def add_direction(projector: np.ndarray, direction: np.ndarray) -> np.ndarray:

@@ -1,15 +1,18 @@
 """Validation of :func:`socbjax.make_network`'s inputs (host side, before anything is traced).
 
 Topology arguments (segments, supports, junctions, probe, strand ids) must be concrete;
-values (positions, tangents, lengths, EI, loads, couples) may be JAX tracers, and the checks
-that need them are then skipped.  With concrete values the reference state must be the
-straight, stress-free state of every strand, to the relative tolerance
+values (positions, tangents, lengths, EI, loads, couples, natural curvature) may be JAX
+tracers, and the checks that need them are then skipped.  With concrete values the
+reference state must be the stress-free state of every strand (straight, or with 2D natural
+curvature a chain of circular arcs), to the relative tolerance
 ``socbjax._checks.GEOMETRY_RTOL`` (1e-6, plus the round-off of the node coordinates):
 
 * tangents are unit vectors to 1e-3 (``UNIT_TANGENT_TOLERANCE``; they are then normalised
   exactly, so hand-typed directions with four decimals are accepted);
 * every segment's chord is non-zero, its length equals the chord and the tangents at both
   its nodes point along the chord (segments run from their first to their second node);
+  with natural curvature κ₀ the chord is 2 sin(κ₀l/2)/κ₀ and the end tangents lie at ∓κ₀l/2
+  from it (|κ₀l| < π);
 * segments and junctions form no closed loop (a network is a forest of open strands), every
   node lies on one or two segments, and at most one segment starts and one ends at a node;
 * index arrays (segments, attach, probe, strand) hold integers: booleans and floats are
@@ -37,6 +40,7 @@ from ._checks import (
 __all__ = [
     "check_degrees",
     "check_loops",
+    "check_natural_curvature",
     "check_reference_state",
     "check_segments",
     "check_supported",
@@ -60,7 +64,7 @@ def concrete_structure(name: str, value):
         raise TypeError(
             f"{name} fixes the network's topology and must be concrete (numpy or Python values), not a traced JAX "
             "value: build the structure outside jax.jit/grad/vmap; only the values positions, tangents, lengths, EI, "
-            "loads and couples may be traced"
+            "loads, couples and natural_curvature may be traced"
         )
     return value
 
@@ -122,9 +126,35 @@ def unit_tangents(tangents: np.ndarray) -> np.ndarray:
     return np.where(rounding[:, None], tangents / norm[:, None], tangents)
 
 
-def check_reference_state(positions, tangents, segments: np.ndarray, lengths) -> None:
-    """The straight, stress-free reference state, for whichever of ``positions``,
-    ``tangents`` [N, d] and ``lengths`` [S] are concrete (None: traced, skipped)."""
+def check_natural_curvature(kappa, lengths, dim: int):
+    """The turn κ₀l [S] (rad) of each segment at rest, or None when it is traced; refuses
+    3D curvature (needs twist) and turns of half a circle or more per segment."""
+    if kappa is None:
+        return None
+    if dim == 3:
+        if np.any(kappa != 0):
+            k = int(np.argmax(np.any(kappa != 0, axis=1)))
+            raise ValueError(f"natural_curvature[{k}] = {kappa[k].tolist()} 1/µm: 3D filaments are naturally straight "
+                             "in this version (a curved 3D rod needs its twist, not modelled yet); pass zeros or build "
+                             "the network in 2D")
+        return np.zeros(len(kappa))
+    if lengths is None:
+        return None if np.any(kappa != 0) else np.zeros(len(kappa))
+    turn = kappa * lengths
+    bad = np.abs(turn) >= np.pi
+    if bad.any():
+        k = int(np.argmax(bad))
+        raise ValueError(f"natural_curvature[{k}] = {kappa[k]:.6g} 1/µm turns segment {k} (length {lengths[k]:.6g} µm) "
+                         f"by {np.degrees(turn[k]):.4g}° at rest; a segment turns by less than 180°: use more, shorter "
+                         "segments")
+    return turn
+
+
+def check_reference_state(positions, tangents, segments: np.ndarray, lengths, turn=None) -> None:
+    """The stress-free reference state, for whichever of ``positions``, ``tangents`` [N, d]
+    and ``lengths`` [S] are concrete (None: traced, skipped).  ``turn`` [S] (rad): each
+    segment's turn κ₀l at rest (2D natural curvature; zeros: straight); None when the natural
+    curvature is traced, and then only the chords are checked for zero length."""
     if positions is None:
         return
     vec = positions[segments[:, 1]] - positions[segments[:, 0]]
@@ -136,27 +166,45 @@ def check_reference_state(positions, tangents, segments: np.ndarray, lengths) ->
         k = int(np.argmax(coincident))
         raise ValueError(f"positions of segment {k}'s end nodes {segments[k].tolist()} coincide at "
                          f"{positions[segments[k, 0]].tolist()} (a zero-length segment); move, merge or remove them")
+    if turn is None:
+        return
     if lengths is not None:
-        off = np.abs(chord - lengths) > GEOMETRY_RTOL * lengths + roundoff
+        expected = lengths * np.sinc(turn / (2 * np.pi))  # 2 sin(κ₀l/2)/κ₀ = l sinc(κ₀l/2)
+        off = np.abs(chord - expected) > GEOMETRY_RTOL * lengths + roundoff
         if off.any():
             k = int(np.argmax(off))
+            shape = "straight" if turn[k] == 0 else f"an arc turning by {np.degrees(turn[k]):.6g}° (natural curvature)"
             raise ValueError(
-                f"lengths[{k}] = {lengths[k]:.9g} µm differs from the distance {chord[k]:.9g} µm between its nodes "
-                f"{segments[k].tolist()}: the reference state must be straight and stress-free, so each segment's "
-                f"length must equal its chord (relative tolerance {GEOMETRY_RTOL:g})")
+                f"lengths[{k}] = {lengths[k]:.9g} µm does not fit the distance {chord[k]:.9g} µm between its nodes "
+                f"{segments[k].tolist()}: the reference state must be stress-free, so segment {k}, {shape}, must have "
+                f"a chord of {expected[k]:.9g} µm (relative tolerance {GEOMETRY_RTOL:g})")
     if tangents is not None:
-        _check_tangents_along_chords(tangents, segments, vec / chord[:, None], GEOMETRY_RTOL + roundoff / chord)
+        _check_tangents_along_chords(tangents, segments, vec / chord[:, None], GEOMETRY_RTOL + roundoff / chord, turn)
 
 
-def _check_tangents_along_chords(tangents, segments, unit_chord, tol) -> None:
+def _rotated(v, angle):
+    """2D vectors [S, 2] rotated by ``angle`` [S] (rad)."""
+    c, s = np.cos(angle), np.sin(angle)
+    return np.stack([c * v[:, 0] - s * v[:, 1], s * v[:, 0] + c * v[:, 1]], axis=1)
+
+
+def _check_tangents_along_chords(tangents, segments, unit_chord, tol, turn) -> None:
+    curved = np.any(turn != 0)
     for end in (0, 1):
         nodes = segments[:, end]
-        err = np.linalg.norm(tangents[nodes] - unit_chord, axis=1)
+        expected = _rotated(unit_chord, (end - 0.5) * turn) if curved else unit_chord
+        err = np.linalg.norm(tangents[nodes] - expected, axis=1)
         bad = err > tol
         if bad.any():
             k = int(np.argmax(bad))
             i = int(nodes[k])
-            angle = np.degrees(np.arccos(np.clip(tangents[i] @ unit_chord[k], -1.0, 1.0)))
+            angle = np.degrees(np.arccos(np.clip(tangents[i] @ expected[k], -1.0, 1.0)))
+            if curved:
+                raise ValueError(
+                    f"tangents[{i}] = {np.round(tangents[i], 9).tolist()} is at {angle:.6g}° to the stress-free "
+                    f"tangent {np.round(expected[k], 9).tolist()} of segment {k} (nodes {segments[k].tolist()}, an arc "
+                    f"turning by {np.degrees(turn[k]):.6g}°): at rest the end tangents lie at ∓half the turn from the "
+                    "chord")
             raise ValueError(
                 f"tangents[{i}] = {np.round(tangents[i], 9).tolist()} is at {angle:.6g}° to segment {k}'s chord "
                 f"(nodes {segments[k].tolist()}, direction {np.round(unit_chord[k], 9).tolist()}): in the straight, "

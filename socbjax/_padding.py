@@ -37,7 +37,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from ._checks import check_int
-from ._network import Network, Padding, make_network
+from ._network import Network, Padding, is_traced, make_network
 from ._probe import end_nodes
 
 __all__ = ["pad_outcrop", "universal_strands"]
@@ -116,6 +116,9 @@ def pad_outcrop(network: Network, generations: int, *, pieces: int = 2) -> tuple
     growth needs more than ``pieces`` segments)."""
     if not isinstance(network, Network):
         raise TypeError(f"network must be a socbjax Network (a dendritic_outcrop), got {type(network).__name__}")
+    if is_traced(network.natural_curvature) or np.any(np.asarray(network.natural_curvature) != 0):
+        raise ValueError("pad_outcrop: the outcrop has natural curvature (e.g. thermal_network), which padding does not "
+                         "carry yet; compress curved outcrops unpadded (socbjax.compress)")
     generations = check_int("generations", generations, minimum=1, maximum=12)
     pieces = check_int("pieces", pieces, minimum=1, maximum=16)
     strands = universal_strands(generations)
@@ -193,5 +196,5 @@ def _assemble(network, nodes, P_pos, P_tan, P_seg, P_len, P_strand, P_attach) ->
     couples[nodes] = np.asarray(network.couples)
     net = template.replace(loads=loads, EI=EI, couples=couples)
     return Network(positions=net.positions, tangents=net.tangents, lengths=net.lengths, EI=net.EI, loads=net.loads,
-                   couples=net.couples, topology=net.topology,
+                   couples=net.couples, natural_curvature=net.natural_curvature, topology=net.topology,
                    padding=Padding(projector=jnp.asarray(projector), active=jnp.asarray(active)))

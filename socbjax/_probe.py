@@ -60,13 +60,19 @@ def end_nodes(network: Network) -> np.ndarray:
 
 
 def _probe_frame(network: Network):
-    """(origin, gap) of the probe's frame: the probe nodes' mean reference position and the
-    height of the farthest opposing support along the probe direction (µm; None if nothing
-    opposes the probe).  numpy for concrete positions, traced with traced ones; a padded
-    network's gap is traced (its supports are values) and counts its active nodes only."""
+    """(origin, gap) of the probe's frame: the reference position of the probe face, the
+    probe nodes' mean moved back along the probe direction to the rearmost probe node (the
+    face touches every held tip; they are coplanar in straight outcrops, not in thermally
+    curved ones), and the height of the farthest opposing support along the probe direction
+    (µm; None if nothing opposes the probe).  numpy for concrete positions, traced with
+    traced ones; a padded network's gap is traced (its supports are values) and counts its
+    active nodes only."""
     traced = is_traced(network.positions)
+    xp = jnp if traced else np
     pos = network.positions if traced else np.asarray(network.positions)
+    axis = np.asarray(network.probe_direction)
     origin = pos[network.probe].mean(axis=0)
+    origin = origin + xp.min((pos[network.probe] - origin) @ axis) * axis
     if network.padding is not None:
         fixed = (jnp.einsum("nii->n", network.padding.projector) > 0.5) & ~network.probe & (network.padding.active > 0.5)
         heights = (pos - origin) @ jnp.asarray(network.probe_direction)

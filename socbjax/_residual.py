@@ -149,8 +149,9 @@ def _segment_rows(state, network, quad, frames, m_start):
     a, b = network.segments[:, 0], network.segments[:, 1]
     r, d, m = state.positions, state.directors, state.moments
     if network.dim == 2:
-        kernel = jax.vmap(planar_segment_residual, in_axes=(0,) * 9 + (None,))
-        return kernel(r[a], d[a], m_start, r[b], d[b], m[b], state.forces, network.lengths, network.EI, quad)
+        kernel = jax.vmap(planar_segment_residual, in_axes=(0,) * 9 + (None, 0))
+        return kernel(r[a], d[a], m_start, r[b], d[b], m[b], state.forces, network.lengths, network.EI, quad,
+                      network.natural_curvature)
     kernel = jax.vmap(spatial_segment_residual, in_axes=(0,) * 10 + (None,))
     return kernel(r[a], d[a], m_start, r[b], d[b], m[b], state.forces, network.lengths, network.EI, frames, quad)
 

@@ -15,6 +15,12 @@ Planar segment (unknowns at each end: angle θ and moment m):
 * Eq. 8:  m_b − m_a = −(r_b − r_a) × n  (chord projections are the moment arms).
 * Eq. 9:  EI (θ_b − θ_a) = ∫_0^l m ds = m_a l − [∫_0^l (l − s) t ds] × n  (exact integral
   form; the printed Eq. 9 lacks 1/EI and the m_a l term and integrates over the chord).
+* Natural curvature κ₀ (1/µm, constant per segment; a circular arc at rest): the bending law
+  becomes m = EI (θ' − κ₀), so the end slopes are θ' = m/EI + κ₀ and Eq. 9 gains EI κ₀ l;
+  θ'' = m'/EI is unchanged.  κ₀ = 0 is the paper's naturally straight segment.
+* The segment's turn θ_b − θ_a is taken in (−π, π] (angles are unwrapped against the start):
+  a segment never turns by half a circle, and the angles at a node may differ by 2π between
+  the segments that meet there (a ring or a long arc built from unwrapped tangent angles).
 
 Spatial segment (unknowns at each end: unit tangent t and moment vector m ⊥ t):
 
@@ -46,7 +52,7 @@ from jaxtyping import Array, Float
 from ._geometry import sphere_exp, sphere_exp_differential_inverse, sphere_log_jet
 from ._quadrature import SegmentQuadrature
 
-__all__ = ["planar_segment_residual", "spatial_segment_residual", "spatial_segment_tangents", "planar_segment_angles",
+__all__ = ["planar_turn", "planar_segment_residual", "spatial_segment_residual", "spatial_segment_tangents", "planar_segment_angles",
            "planar_segment_curve", "spatial_segment_curve"]
 
 
@@ -54,23 +60,31 @@ def _cross2(a: Array, b: Array) -> Array:
     return a[..., 0] * b[..., 1] - a[..., 1] * b[..., 0]
 
 
-def planar_segment_angles(theta_a, m_a, theta_b, m_b, n, length, EI, basis) -> Float[Array, " K"]:
-    """θ at the points tabulated by ``basis`` ([K, 6] Hermite basis) from the end data."""
+def planar_turn(theta_a, theta_b):
+    """θ_b − θ_a in (−π, π] (rad): the turn of one segment, whatever multiple of 2π lies
+    between the two angles."""
+    d = theta_b - theta_a
+    return jnp.arctan2(jnp.sin(d), jnp.cos(d))
+
+
+def planar_segment_angles(theta_a, m_a, theta_b, m_b, n, length, EI, basis, kappa0=0.0) -> Float[Array, " K"]:
+    """θ at the points tabulated by ``basis`` ([K, 6] Hermite basis) from the end data;
+    ``kappa0``: the segment's natural curvature (1/µm)."""
+    theta_b = theta_a + planar_turn(theta_a, theta_b)
     t_a = jnp.stack([jnp.cos(theta_a), jnp.sin(theta_a)])
     t_b = jnp.stack([jnp.cos(theta_b), jnp.sin(theta_b)])
     curv2_a = -_cross2(t_a, n) / EI
     curv2_b = -_cross2(t_b, n) / EI
-    data = jnp.stack(
-        [theta_a, length * m_a / EI, length**2 * curv2_a, theta_b, length * m_b / EI, length**2 * curv2_b]
-    )
+    data = jnp.stack([theta_a, length * (m_a / EI + kappa0), length**2 * curv2_a,
+                      theta_b, length * (m_b / EI + kappa0), length**2 * curv2_b])
     return basis @ data
 
 
-def planar_segment_curve(theta_a, m_a, theta_b, m_b, n, length, EI, basis, dbasis):
+def planar_segment_curve(theta_a, m_a, theta_b, m_b, n, length, EI, basis, dbasis, kappa0=0.0):
     """(θ [K], dθ/ds [K] in 1/µm) at the points tabulated by ``basis`` and its σ-derivative
     ``dbasis`` ([K, 6] each): the segment's quintic and its curvature."""
-    return (planar_segment_angles(theta_a, m_a, theta_b, m_b, n, length, EI, basis),
-            planar_segment_angles(theta_a, m_a, theta_b, m_b, n, length, EI, dbasis) / length)
+    return (planar_segment_angles(theta_a, m_a, theta_b, m_b, n, length, EI, basis, kappa0),
+            planar_segment_angles(theta_a, m_a, theta_b, m_b, n, length, EI, dbasis, kappa0) / length)
 
 
 def planar_segment_residual(
@@ -84,9 +98,11 @@ def planar_segment_residual(
     length: Float[Array, ""],
     EI: Float[Array, ""],
     quad: SegmentQuadrature,
+    kappa0: Float[Array, ""] = 0.0,
 ) -> Float[Array, "4"]:
-    """Residuals (Eq. 7 x, Eq. 7 y, Eq. 8, Eq. 9) of one planar segment, dimensionless."""
-    theta = planar_segment_angles(theta_a, m_a, theta_b, m_b, n, length, EI, quad.basis)
+    """Residuals (Eq. 7 x, Eq. 7 y, Eq. 8, Eq. 9) of one planar segment, dimensionless;
+    ``kappa0``: natural curvature (1/µm)."""
+    theta = planar_segment_angles(theta_a, m_a, theta_b, m_b, n, length, EI, quad.basis, kappa0)
     t = jnp.stack([jnp.cos(theta), jnp.sin(theta)], axis=-1)  # [K, 2]
     w = jnp.asarray(quad.weights)
     sigma = jnp.asarray(quad.points)
@@ -94,7 +110,7 @@ def planar_segment_residual(
     length_eq = (chord - length * (w @ t)) / length
     moment_eq = (m_b - m_a + _cross2(chord, n)) * length / EI
     lever = length**2 * ((w * (1.0 - sigma)) @ t)  # ∫_0^l (l − s) t ds = ∫_0^l (r(s) − r_a) ds
-    bending_eq = (EI * (theta_b - theta_a) - (m_a * length - _cross2(lever, n))) / EI
+    bending_eq = (EI * (planar_turn(theta_a, theta_b) - kappa0 * length) - (m_a * length - _cross2(lever, n))) / EI
     return jnp.concatenate([length_eq, moment_eq[None], bending_eq[None]])
 
 

@@ -23,9 +23,10 @@ from socbjax import CompressionResult, LimitPoint, atomic_path, check_output_pat
 
 
 def make_result(dim=3, K=7, N=4, E=1, seed=0):
-    """A hand-built result on a 4-node column: K steps, N nodes, S = N − 1 segments."""
+    """A hand-built result on a 4-node column (2D: crimped, with natural curvature): K steps,
+    N nodes, S = N − 1 segments."""
     rng = np.random.default_rng(seed)
-    net = sj.column(N, dim=dim)
+    net = sj.column(N, dim=dim) if dim == 3 else sj.crimped_fibre(N, length=1.0, wavelength=0.8, crimp_angle=20.0)
     S = N - 1
     moments = rng.normal(size=(K, N, 3) if dim == 3 else (K, N))
     return CompressionResult(
@@ -57,7 +58,7 @@ def assert_results_equal(a, b):
         x, y = getattr(a, field.name), getattr(b, field.name)
         if field.name == "network":
             assert x.topology == y.topology and y.dim == x.dim and type(y.dim) is int
-            for name in ("positions", "tangents", "lengths", "EI", "loads", "couples"):
+            for name in ("positions", "tangents", "lengths", "EI", "loads", "couples", "natural_curvature"):
                 u, v = np.asarray(getattr(x, name)), np.asarray(getattr(y, name))
                 assert u.dtype == v.dtype and u.shape == v.shape, name
                 np.testing.assert_array_equal(u, v)
@@ -96,7 +97,7 @@ def test_file_layout_units_and_stamps(tmp_path):
         # headers, out of HDF5's unchecksummed global heap.
         text = {name: f.attrs[name].decode() for name in ("format", "socbjax_version", "created", "result")}
         assert text["format"] == "socbjax.compression" and text["socbjax_version"] == sj.__version__
-        assert f.attrs["format_version"] == 2 and text["result"] == "max_steps"
+        assert f.attrs["format_version"] == 3 and text["result"] == "max_steps"
         assert f["units"].attrs["displacement"].decode() == "µm" and f["units"].attrs["moments"].decode() == "pN·µm"
         assert f["path/force"].attrs["units"].decode() == "pN"
         assert f["network"].attrs["dim"] == 3
@@ -186,7 +187,7 @@ def test_foreign_and_future_files_rejected(tmp_path):
     with pytest.raises(ValueError, match="socbjax.compression file"):
         sj.load_checkpoint(path)
     with h5py.File(path, "a") as f:
-        f.attrs["format_version"] = 3
+        f.attrs["format_version"] = 4
     with pytest.raises(ValueError, match="newer socbjax"):
         sj.load(path)
 
@@ -216,7 +217,7 @@ def test_checkpoint_round_trip_is_bitwise(tmp_path, rng):
         assert isinstance(got, np.ndarray) and got.dtype == value.dtype and got.shape == value.shape, name
         assert got.tobytes() == value.tobytes(), name
     with h5py.File(path, "r") as f:
-        assert f.attrs["format"].decode() == "socbjax.checkpoint" and f.attrs["format_version"] == 2
+        assert f.attrs["format"].decode() == "socbjax.checkpoint" and f.attrs["format_version"] == 3
     with pytest.raises(ValueError, match="socbjax.checkpoint file"):
         sj.load(path)
 
@@ -259,6 +260,20 @@ def test_reads_files_of_the_first_0_1_0_layout(tmp_path):
     assert meta == {"i": 1} and list(arrays) == ["carry/X"] and arrays["carry/X"].tolist() == [0.0, 1.0, 2.0]
 
 
+def test_reads_format_version_2_results_as_naturally_straight(tmp_path):
+    """Format 2 had no natural curvature: its networks are straight."""
+    result = make_result(dim=3)
+    path = sj.save(result, tmp_path / "run.h5")
+    with h5py.File(path, "a") as f:
+        f.attrs["format_version"] = 2
+        del f["network/natural_curvature"]
+    assert_results_equal(result, sj.load(path))
+    with h5py.File(path, "a") as f:
+        f.attrs["format_version"] = 3
+    with pytest.raises(ValueError, match=r"lacks \['natural_curvature'\]"):
+        sj.load(path)
+
+
 def test_reads_format_version_1_results(tmp_path):
     """Format 1 (socbjax 0.1): an integer status, no nodal couples, no leaving_segment."""
     result = make_result()
@@ -267,7 +282,7 @@ def test_reads_format_version_1_results(tmp_path):
         f.attrs["format_version"] = 1
         del f.attrs["result"]
         f.attrs["status"] = 6  # MAX_STEPS in socbjax 0.1
-        del f["network/couples"], f["network/leaving_segment"]
+        del f["network/couples"], f["network/leaving_segment"], f["network/natural_curvature"]
     assert_results_equal(result, sj.load(path))
 
 
