@@ -49,11 +49,12 @@ def check_curvable(network: Network, what: str) -> None:
 
 
 def _anchors(network: Network) -> np.ndarray:
-    """Node order by preference as the anchor of its piece: clamped, then fixed, then probe
-    nodes, then the rest (stable in the node index)."""
+    """Node order by preference as the anchor of its piece: clamped (the base of a filament,
+    the seed of an outcrop on the probe), then probe, then other position-supported nodes,
+    then the rest (stable in the node index)."""
     fixed = np.einsum("nii->n", np.asarray(network.position_projector)) > 0.5
     probe = np.asarray(network.probe)
-    rank = np.where(network.clamped & ~probe, 0, np.where(fixed & ~probe, 1, np.where(probe, 2, 3)))
+    rank = np.where(network.clamped, 0, np.where(probe, 1, np.where(fixed, 2, 3)))
     return np.argsort(rank, kind="stable")
 
 
@@ -79,7 +80,7 @@ def with_natural_curvature(network: Network, natural_curvature) -> Network:
 
     Topology, supports, probe direction, loads, couples and EI are unchanged; each connected
     piece keeps the position and tangent of one anchor node (its first clamped node, else
-    its first position-supported node, else a probe node, else its first node) and every
+    its first probe node, else its first position-supported node, else its first node) and every
     other node moves to where the arcs place it: a supported node's prescribed position is
     its new reference position.  Junction angles are kept.  ``ValueError`` for a turn κ₀l of
     half a circle or more in one segment; ``NotImplementedError`` in 3D (see module).

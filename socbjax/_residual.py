@@ -40,7 +40,7 @@ from ._geometry import orthonormal_complement
 from ._junction import director_targets, moment_transfer, nodal_couple_transfer
 from ._network import Network
 from ._quadrature import SegmentQuadrature
-from ._segment import planar_segment_residual, spatial_segment_residual
+from ._segment import planar_segment_residual, planar_turn, spatial_segment_residual
 
 __all__ = [
     "Control",
@@ -168,7 +168,8 @@ def socb_residual(state: SOCBState, network: Network, control: Control, frames: 
     support = support_rows(r, imbalance, network, control)
     end_moment = (m - junction_node - couple_node) * (length_ref / EI_ref)
     director_error = d - director_targets(d, network)
-    if network.dim == 2:
+    if network.dim == 2:  # angles agree modulo 2π (arctan2 of the reference wraps at ±π)
+        director_error = planar_turn(0.0, director_error)
         candidates = jnp.concatenate([support, director_error[:, None], end_moment[:, None]], axis=1)
     else:
         norm_row = 0.5 * (jnp.sum(d * d, axis=1) - 1.0)

@@ -130,3 +130,24 @@ def test_branched_network_is_rotation_equivariant(rng):
     # The daughter keeps its branch angle to the mother, however the mother turned.
     t = np.asarray(base.tangents)
     assert np.degrees(np.arccos(np.clip(t[J] @ t[D], -1, 1))) == pytest.approx(50.0, abs=1e-9)
+
+
+@pytest.mark.parametrize("turn_deg", [150.0, 120.0])
+def test_planar_branched_network_is_rotation_equivariant_across_the_angle_wrap(turn_deg):
+    """Rotated so that the mother points at ``turn_deg`` and the 70° daughter past ±180°
+    (arctan2 of its reference tangent wraps by 2π): the same solution, rotated."""
+    net, J, D = branched_cantilever(2, n_mother=4, daughter_length=0.6)
+    n = net.n_nodes
+    loads = {n - 1: [0.3, 1.2], 2: [0.0, -0.4]}
+    base = sj.solve(net, loads)
+    c, s = np.cos(np.radians(turn_deg)), np.sin(np.radians(turn_deg))
+    Q = np.array([[c, -s], [s, c]])
+    pos, tan = np.asarray(net.positions) @ Q.T, np.asarray(net.tangents) @ Q.T
+    angles = np.degrees(np.arctan2(tan[:, 1], tan[:, 0]))
+    assert abs(angles[D] - angles[J]) > 180.0  # the daughter's reference angle wrapped
+    fixed = [np.eye(2)] + [np.zeros((0, 2))] * (n - 1)
+    rotated_net = sj.make_network(pos, tan, np.asarray(net.segments), np.asarray(net.lengths), 1.0,
+                                  fixed_directions=fixed, clamped=np.arange(n) == 0, attach=[(J, D)])
+    rotated = sj.solve(rotated_net, {k: Q @ np.asarray(v) for k, v in loads.items()})
+    np.testing.assert_allclose(np.asarray(rotated.positions), np.asarray(base.positions) @ Q.T, atol=1e-9)
+    np.testing.assert_allclose(np.asarray(rotated.moments), np.asarray(base.moments), atol=1e-9)
