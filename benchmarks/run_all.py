@@ -30,6 +30,7 @@ SCRIPTS = [
     "solve_gradient_cost",
     "fit_recovery",
     "lawn_throughput",
+    "thermal_compression",
     "peers/elastica_comparison",  # PyElastica columns only with the extra socbjax[peers]
 ]
 

@@ -114,7 +114,7 @@ def _check_members(networks) -> list[Network]:
             raise ValueError(
                 f"member {i} differs from member 0 in its topology ({_difference(networks[0], net)}): the members of an "
                 "ensemble must share dimension, segments, junctions, strands, supports and probe; only the values of "
-                "positions, tangents, lengths, EI, loads and couples may differ (group networks of different topology "
+                "positions, tangents, lengths, EI, loads, couples and natural_curvature may differ (group networks of different topology "
                 "into separate ensembles)"
             )
     return list(networks)

@@ -67,6 +67,22 @@ def check_cantilever_row(row):
     assert abs(measured - error) <= max(0.06 * error, 1.2e-5), (row, measured)
 
 
+def test_curved_filaments_block_runs_and_thermal_shapes_remove_the_step_at_zero():
+    """The README's curved-filament block; the straight mesh's force jumps at u = 0 (its
+    strands carry load unbent until they buckle), the thermally curved one starts from 0."""
+    scope = {}
+    exec(compile(python_block("## Curved filaments and thermal shapes"), "README.md", "exec"), scope)
+    res, mesh = scope["res"], scope["mesh"]
+    assert res.completed and np.any(np.asarray(mesh.natural_curvature) != 0)
+    straight = scope["sj"].compress(scope["sj"].unit_dendritic_mesh(dim=2), 0.5, method="arclength", throw=False)
+
+    def first_step_force(r):
+        loading = (np.asarray(r.phase) == 1) & (np.asarray(r.displacement) > 1e-9)
+        return float(np.asarray(r.force)[loading][0])
+
+    assert first_step_force(res) < 0.5 * first_step_force(straight)
+
+
 def test_readme_validation_rows_for_two_and_three_socb_nodes():
     rows = [r for r in readme_table(CANTILEVER_TABLE) if r[0] == "SOCB" and r[1] in ("2", "3")]
     assert len(rows) == 2
