@@ -89,7 +89,7 @@ def _concrete(name: str, value):
 
 
 def cantilever(
-    n_nodes: int, *, length: float = 1.0, EI: float = 1.0, dim: int = 3, direction=None, origin=None
+    n_nodes: int, *, length: float = 1.0, EI: float = 1.0, dim: int = 3, direction=None, origin=None, GJ=None
 ) -> Network:
     """A straight filament from the origin along ``direction``: node 0 clamped, last node free.
 
@@ -102,12 +102,15 @@ def cantilever(
     dim : the integer 2 (planar) or 3 (spatial); floats such as ``2.0`` are refused.
     direction : non-zero vector of the filament axis (normalised if not unit); default +x.
     origin : position of the clamped node 0 (µm); default the origin.
+    GJ : torsional stiffness (pN·µm²), scalar or per segment: in 3D a Kirchhoff rod with
+        twist whose clamp fixes the whole frame (see :func:`socbjax.make_network`); None
+        (default): the torsion-free rod.
 
     Bad arguments raise ``TypeError`` (wrong type: a float or boolean count, a string) or
     ``ValueError`` (NaN, infinite, non-positive, too many nodes) naming the argument.
     """
     return column(
-        n_nodes, length=length, EI=EI, supports=("clamped", "free"), dim=dim, direction=direction, origin=origin
+        n_nodes, length=length, EI=EI, supports=("clamped", "free"), dim=dim, direction=direction, origin=origin, GJ=GJ
     )
 
 
@@ -120,6 +123,7 @@ def column(
     dim: int = 3,
     direction=None,
     origin=None,
+    GJ=None,
 ) -> Network:
     """A straight column from the origin along ``direction`` with end ``supports``.
 
@@ -129,7 +133,8 @@ def column(
     node fix its lateral position, "clamped" also its tangent.  Classic cases and their
     Euler loads (EI/L²): ("clamped", "free") π²/4, ("pinned", "pinned") π²,
     ("clamped", "pinned") 20.19, ("clamped", "clamped") 4π².  ``origin``: position of
-    node 0 (µm), default the origin.  Other arguments (and their limits) as for
+    node 0 (µm), default the origin.  ``GJ`` (pN·µm²) as for :func:`cantilever`; a clamped
+    end then fixes the frame, other ends leave the twist free.  Other arguments (and their limits) as for
     :func:`cantilever`.  ``supports`` must be a pair of those strings (``TypeError``
     otherwise); an unknown name or a mechanism is a ``ValueError``.
     """
@@ -151,5 +156,6 @@ def column(
         EI_arr,
         fixed_directions=fixed,
         clamped=clamped,
+        GJ=GJ,
     )
 

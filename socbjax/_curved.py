@@ -114,7 +114,8 @@ def with_natural_curvature(network: Network, natural_curvature) -> Network:
     tangents = np.stack([np.cos(theta), np.sin(theta)], axis=1)
     check_reference_state(positions, tangents, np.asarray(network.segments), lengths, turns)
     return Network(positions=positions, tangents=tangents, lengths=network.lengths, EI=network.EI, loads=network.loads,
-                   couples=network.couples, natural_curvature=np.array(kappa, float), topology=network.topology)
+                   couples=network.couples, natural_curvature=np.array(kappa, float), GJ=network.GJ,
+                   topology=network.topology)
 
 
 def _check_dim_2(dim, GJ, what: str) -> None:

@@ -40,7 +40,8 @@ class Solution(eqx.Module):
     angles : 2D [N] angle θ (rad, winding kept); 3D [N, 2] in-plane θ = atan2(t_y, t_x) and
         out-plane φ = asin(t_z) (rad) — for reporting only; the 3D solver uses no angles.
     moments : 2D [N] bending moment (pN·µm); 3D [N, 3] moment vector.
-    curvatures : 2D [N] signed curvature dθ/ds (1/µm); 3D [N, 3] curvature vector t × t'.
+    curvatures : 2D [N] signed curvature dθ/ds (1/µm) relative to the rest shape (m/EI; the
+        natural curvature of the segments is added to it); 3D [N, 3] curvature vector t × t'.
     segment_forces : [S, d] internal force per segment (pN).
     reactions : [N, d] support reaction forces (pN), zero at free nodes.
     result : a :class:`socbjax.RESULTS` item; ``converged`` is ``result == successful``.

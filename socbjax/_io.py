@@ -84,7 +84,7 @@ from ._solution import result_name
 from ._version import __version__
 
 TOPOLOGY_FIELDS = ("segments", "position_projector", "clamped", "moment_free", "attach", "transfer_segment",
-                   "leaving_segment", "probe", "probe_direction", "strand", "socb_rows")
+                   "leaving_segment", "probe", "probe_direction", "strand", "socb_rows", "twisting")
 
 __all__ = ["FORMAT_VERSION", "UNITS", "atomic_path", "check_output_path", "finite_json", "load", "load_checkpoint",
            "output_lock", "save", "save_checkpoint"]
@@ -103,6 +103,7 @@ UNITS = {
     "network/tangents": "1",
     "network/lengths": "µm",
     "network/natural_curvature": "1/µm",
+    "network/GJ": "pN·µm²",
     "network/EI": "pN·µm²",
     "network/loads": "pN",
     "network/couples": "pN·µm",

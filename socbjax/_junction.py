@@ -167,9 +167,10 @@ def moment_transfer(state, network):
     Returns (per segment [S] / [S, 3]: subtracted from the start moment of the mother segment
     that leaves the junction; per node: subtracted in the end-moment equation of a mother
     node where no segment leaves).  In 3D the twist component along the mother tangent is
-    dropped."""
+    dropped by the torsion-free rod and kept by a twisting network."""
     J = network.attach
-    m = _perpendicular(state.moments, state.directors, J, network.dim)
+    # the torsion-free rod drops the twist; with twist the mother carries the whole moment
+    m = state.moments if network.twisting else _perpendicular(state.moments, state.directors, J, network.dim)
     attached = jnp.asarray(network.attached).reshape((-1,) + (1,) * (m.ndim - 1))
     return _split_transfer(jnp.where(attached, m, 0.0), network, network.transfer_segment, J)
 

@@ -31,7 +31,7 @@ from ._version import __version__
 __all__ = ["CHECKPOINT_FORMAT", "FORMAT_VERSION", "MAX_MAGNITUDE", "PATH_FIELDS", "RESULT_FORMAT", "limit_point_kind",
            "open_file", "read_checkpoint", "read_result"]
 
-FORMAT_VERSION = 3  # 3: natural curvature; 2: result name (RESULTS), couples, topology; 1 and 2 still readable
+FORMAT_VERSION = 3  # 3: natural curvature, GJ and twisting; 2: result name (RESULTS), couples, topology; 1 and 2 still readable
 RESULT_FORMAT = "socbjax.compression"
 CHECKPOINT_FORMAT = "socbjax.checkpoint"
 # Limit-point kinds are open-ended (force_maximum, fold, surface_crossing, ...): any identifier
@@ -47,12 +47,14 @@ _PATH_LAYOUT = {
 PATH_FIELDS = tuple(_PATH_LAYOUT)
 _NETWORK_LAYOUT = {
     "positions": ("f", "Nd"), "segments": ("iu", "S2"), "tangents": ("f", "Nd"), "lengths": ("f", "S"),
-    "EI": ("f", "S"), "loads": ("f", "Nd"), "couples": ("f", "Nm"), "natural_curvature": ("f", "Sm"), "position_projector": ("f", "Ndd"),
+    "EI": ("f", "S"), "loads": ("f", "Nd"), "couples": ("f", "Nm"), "natural_curvature": ("f", "Sm"), "GJ": ("f", "S"),
+    "position_projector": ("f", "Ndd"),
     "clamped": ("b", "N"), "moment_free": ("b", "N"), "attach": ("iu", "N"), "transfer_segment": ("iu", "N"),
     "leaving_segment": ("iu", "N"), "probe": ("b", "N"), "probe_direction": ("f", "d"), "strand": ("iu", "S"),
-    "socb_rows": ("iu", "R"),
+    "socb_rows": ("iu", "R"), "twisting": ("b", "N"),
 }
-_OPTIONAL = {1: ("couples", "leaving_segment", "natural_curvature"), 2: ("natural_curvature",)}  # absent before
+_OPTIONAL = {1: ("couples", "leaving_segment", "natural_curvature", "GJ", "twisting"),
+             2: ("natural_curvature", "GJ", "twisting")}  # absent before format 3
 _KIND_NAMES = {"f": "float32/float64", "b": "bool", "iu": "integer", "s": "string"}
 _LIMIT_DTYPES = {"str": "s", "int": "iu", "float": "f"}  # dtype kinds of the LimitPoint fields
 
@@ -162,9 +164,14 @@ def _read_network(reader: Reader, version: int) -> tuple[Network, _Sizes]:
         a["leaving_segment"][a["segments"][:, 0]] = np.arange(s)
     for name in ("transfer_segment", "leaving_segment"):
         _check_range(f"/network/{name}", a[name], s + 1, f"segment indices, {s} for none")
-    _check_range("/network/socb_rows", a["socb_rows"], n * (4 if dim == 2 else 11), "node equation rows")
+    a.setdefault("twisting", np.zeros(n, bool))
+    if a["twisting"].any() != a["twisting"].all() or (dim == 2 and a["twisting"].any()):
+        raise InvalidFile("/network/twisting must be all False, or all True in a 3D network")
+    width = 4 if dim == 2 else 11 + int(a["twisting"].any())
+    _check_range("/network/socb_rows", a["socb_rows"], n * width, "node equation rows")
     a.setdefault("couples", np.zeros((n,) if dim == 2 else (n, 3)))
     a.setdefault("natural_curvature", np.zeros((s,) if dim == 2 else (s, 3)))
+    a.setdefault("GJ", np.zeros(s))
     values = {name: jnp.asarray(a.pop(name)) for name in DIFFERENTIABLE_FIELDS}
     return Network(**values, topology=Topology(dim=dim, **a)), sizes
 

@@ -57,14 +57,15 @@ from ._network_checks import (
     unit_tangents,
 )
 
-__all__ = ["DIFFERENTIABLE_FIELDS", "Network", "Padding", "Topology", "add_direction", "is_traced", "make_network"]
+__all__ = ["DIFFERENTIABLE_FIELDS", "Network", "Padding", "Topology", "add_direction", "is_traced", "make_network",
+           "node_row_width"]
 
 # Network arrays that carry values (traced, differentiable); everything else is topology.
-DIFFERENTIABLE_FIELDS = ("positions", "tangents", "lengths", "EI", "loads", "couples", "natural_curvature")
+DIFFERENTIABLE_FIELDS = ("positions", "tangents", "lengths", "EI", "loads", "couples", "natural_curvature", "GJ")
 _STRUCTURE = ("segments", "position_projector", "clamped", "moment_free", "attach", "transfer_segment",
-              "leaving_segment", "probe", "probe_direction", "strand", "socb_rows")
+              "leaving_segment", "probe", "probe_direction", "strand", "socb_rows", "twisting")
 _DTYPES = {"position_projector": np.float64, "probe_direction": np.float64, "clamped": np.bool_, "moment_free": np.bool_,
-           "probe": np.bool_}  # every other structure array is int32
+           "probe": np.bool_, "twisting": np.bool_}  # every other structure array is int32
 
 
 class Topology:
@@ -76,7 +77,9 @@ class Topology:
     ``position_projector`` [N, d, d]; ``clamped``, ``moment_free``, ``probe`` [N] bool;
     ``attach``, ``transfer_segment``, ``leaving_segment`` [N] int (``leaving_segment[i]``:
     the segment that starts at node i, S if none); ``probe_direction`` [d]; ``strand`` [S]
-    int; ``socb_rows`` [R] int (the static selection of SOCB node equations).
+    int; ``socb_rows`` [R] int (the static selection of SOCB node equations); ``twisting``
+    [N] bool (3D Kirchhoff rod with twist: every node carries a material-frame angle; all
+    False for the torsion-free rod and in 2D).
     """
 
     __slots__ = ("dim", "_key", *_STRUCTURE)
@@ -145,7 +148,9 @@ class Network(eqx.Module):
     couples : 2D [N], 3D [N, 3] fixed external nodal couples (pN·µm).
     natural_curvature : 2D [S] curvature of each segment at rest (1/µm; each segment is a
         circular arc when unloaded, 0: straight); 3D [S, 3], zero (3D filaments are
-        naturally straight until twist is modelled).
+        naturally straight in this version).
+    GJ : [S] torsional stiffness per segment (pN·µm²); used by 3D networks built with
+        ``GJ=`` (``twisting``), zeros otherwise.
     topology : the static structure (``segments``, supports, junctions, probe, ...), whose
         arrays are also available as read-only numpy attributes of the network.
     padding : None, or the :class:`Padding` of a realisation padded to a common topology
@@ -159,6 +164,7 @@ class Network(eqx.Module):
     loads: Float[Array, "N d"]
     couples: Array
     natural_curvature: Array
+    GJ: Float[Array, " S"]
     topology: Topology = eqx.field(static=True)
     padding: Padding | None = None
 
@@ -184,6 +190,12 @@ class Network(eqx.Module):
     probe_direction = property(lambda self: self.topology.probe_direction)
     strand = property(lambda self: self.topology.strand)
     socb_rows = property(lambda self: self.topology.socb_rows)
+
+    @property
+    def twisting(self) -> bool:
+        """True for a 3D Kirchhoff rod with twist (built with ``GJ=``): nodes carry a
+        material-frame angle, moments a twisting component m·t = GJ τ."""
+        return bool(self.topology.twisting.any())
 
     @property
     def n_nodes(self) -> int:
@@ -238,16 +250,27 @@ class Network(eqx.Module):
 # Candidate node equations, per node, in a fixed order (see _residual / _jointed):
 #   2D SOCB:    force/position (2) | clamp θ (1) | end moment (1)                 -> 4
 #   3D SOCB:    force/position (3) | |t|=1 (1) | clamp t (3) | m·t=0 (1) | end m (3) -> 11
-def _socb_rows(dim: int, director_fixed: np.ndarray, moment_free: np.ndarray) -> np.ndarray:
+#   3D twisting: the same | frame angle ψ (1)                                     -> 12
+def _socb_rows(dim: int, director_fixed: np.ndarray, moment_free: np.ndarray, twisting: bool = False) -> np.ndarray:
     """Static selection of node equations: clamped and daughter-base nodes prescribe the
-    director, free/pinned ends the moment (see :mod:`socbjax._residual`)."""
+    director (and with twist the frame angle), free/pinned ends the moment; the torsion-free
+    rod has m·t = 0 elsewhere (see :mod:`socbjax._residual`)."""
     if dim == 2:
         local = np.array([[1, 1, c, f] for c, f in zip(director_fixed, moment_free)], bool).reshape(-1, 4)
+    elif twisting:
+        local = np.array(
+            [[1, 1, 1, not c, c, c, c, 0, f, f, f, c] for c, f in zip(director_fixed, moment_free)], bool
+        ).reshape(-1, 12)
     else:
         local = np.array(
             [[1, 1, 1, not c, c, c, c, not f, f, f, f] for c, f in zip(director_fixed, moment_free)], bool
         ).reshape(-1, 11)
     return np.flatnonzero(local.ravel()).astype(np.int32)
+
+
+def node_row_width(network) -> int:
+    """Candidate node equations per node (4 in 2D, 11 in 3D, 12 with twist)."""
+    return 4 if network.dim == 2 else 11 + int(bool(np.asarray(network.topology.twisting).any()))
 
 
 def _shapes(positions) -> tuple[int, int]:
@@ -261,7 +284,7 @@ def _shapes(positions) -> tuple[int, int]:
 
 def make_network(positions, tangents, segments, lengths, EI, *, fixed_directions=None, clamped=None, attach=None,
                  probe=None, probe_direction=None, loads=None, couples=None, strand=None,
-                 natural_curvature=None) -> Network:
+                 natural_curvature=None, GJ=None) -> Network:
     """Build and validate a :class:`Network`.
 
     Parameters
@@ -282,6 +305,11 @@ def make_network(positions, tangents, segments, lengths, EI, *, fixed_directions
         external nodal couples (pN·µm).  strand : [S] non-negative integer strand ids.
     natural_curvature : 2D [S] or scalar, each segment's curvature at rest (1/µm, positive:
         turning counter-clockwise; default 0, straight).  3D: [S, 3], zero only.
+    GJ : [S] or scalar torsional stiffness (pN·µm²).  In 3D it makes the network a
+        Kirchhoff rod with twist: every node gets a material frame (its angle ψ about the
+        tangent, from the reference director ``orthonormal_complement(tangent)[0]``), clamps
+        and junctions fix the whole frame, moments keep their twisting component.  None
+        (default): the torsion-free rod.  In 2D it is stored and unused.
 
     ``positions``, ``tangents``, ``lengths``, ``EI``, ``loads``, ``couples`` and
     ``natural_curvature`` may be JAX arrays or tracers (inside ``jax.jit``, ``jax.grad``,
@@ -311,6 +339,8 @@ def make_network(positions, tangents, segments, lengths, EI, *, fixed_directions
     natural_curvature, kappa_np = network_value("natural_curvature", natural_curvature, (s,) if dim == 2 else (s, 3),
                                                 "1/µm")
     turn = check_natural_curvature(kappa_np, len_np, dim)
+    twisting = GJ is not None and dim == 3
+    GJ, _ = network_value("GJ", GJ, (s,), "pN·µm²", positive=True) if GJ is not None else (np.zeros(s), None)
     if tan_np is not None:
         tangents = tan_np = unit_tangents(tan_np)
     n_start, n_end = check_degrees(seg, n)
@@ -340,10 +370,11 @@ def make_network(positions, tangents, segments, lengths, EI, *, fixed_directions
         dim=dim, segments=seg, position_projector=projector, clamped=clamped, moment_free=moment_free,
         attach=attach_arr.astype(np.int32), transfer_segment=transfer_segments(attach_arr, seg, n_start).astype(np.int32),
         leaving_segment=leaving.astype(np.int32), probe=probe_nodes, probe_direction=direction,
-        strand=strand, socb_rows=_socb_rows(dim, clamped | attached, moment_free),
+        strand=strand, socb_rows=_socb_rows(dim, clamped | attached, moment_free, twisting),
+        twisting=np.full(n, twisting),
     )
     return Network(positions=positions, tangents=tangents, lengths=lengths, EI=EI, loads=loads, couples=couples,
-                   natural_curvature=natural_curvature, topology=topology)
+                   natural_curvature=natural_curvature, GJ=GJ, topology=topology)
 
 
 def add_direction(projector: np.ndarray, direction: np.ndarray) -> np.ndarray:

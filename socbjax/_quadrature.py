@@ -111,7 +111,8 @@ def hermite_basis_derivative(points: tuple[float, ...]) -> np.ndarray:
 
 
 class SegmentQuadrature:
-    """Constant tables for one quadrature order: points, weights, Hermite basis, A."""
+    """Constant tables for one quadrature order: points, weights, Hermite basis and its
+    σ-derivative, A."""
 
     def __init__(self, order: int = 8):
         if not isinstance(order, (int, np.integer)) or order < 2:
@@ -119,6 +120,7 @@ class SegmentQuadrature:
         self.order = int(order)
         self.points, self.weights = gauss_legendre(self.order)
         self.basis = hermite_basis(tuple(self.points.tolist()))
+        self.dbasis = hermite_basis_derivative(tuple(self.points.tolist()))  # d/dσ of the basis
         self.integration = integration_matrix(self.order)
 
     def __hash__(self) -> int:

@@ -38,9 +38,10 @@ from jaxtyping import Array, Float
 
 from ._geometry import orthonormal_complement
 from ._junction import director_targets, moment_transfer, nodal_couple_transfer
-from ._network import Network
+from ._network import Network, node_row_width
 from ._quadrature import SegmentQuadrature
 from ._segment import planar_segment_residual, planar_turn, spatial_segment_residual
+from ._twist import carried_directors, twist_targets
 
 __all__ = [
     "Control",
@@ -53,6 +54,7 @@ __all__ = [
     "support_rows",
     "socb_structure",
     "state_tangents",
+    "n_twists",
 ]
 
 
@@ -82,6 +84,12 @@ class SOCBState(eqx.Module):
     directors: Array  # 2D: angles [N] (rad); 3D: tangents [N, 3]
     moments: Array  # 2D: [N] (pN·µm); 3D: [N, 3]
     forces: Float[Array, "S d"]  # internal force per segment (pN)
+    twists: Array  # material-frame angles [N] (rad) of a twisting network, else [0]
+
+
+def n_twists(network: Network) -> int:
+    """Number of frame-angle unknowns: N for a twisting network, else 0."""
+    return network.n_nodes if network.twisting else 0
 
 
 def state_tangents(directors, dim: int) -> Array:
@@ -152,8 +160,12 @@ def _segment_rows(state, network, quad, frames, m_start):
         kernel = jax.vmap(planar_segment_residual, in_axes=(0,) * 9 + (None, 0))
         return kernel(r[a], d[a], m_start, r[b], d[b], m[b], state.forces, network.lengths, network.EI, quad,
                       network.natural_curvature)
-    kernel = jax.vmap(spatial_segment_residual, in_axes=(0,) * 10 + (None,))
-    return kernel(r[a], d[a], m_start, r[b], d[b], m[b], state.forces, network.lengths, network.EI, frames, quad)
+    twist = None
+    if network.twisting:
+        e = carried_directors(state_tangents(d, 3), network)
+        twist = (state.twists[a], state.twists[b], e[a], e[b], network.GJ)
+    kernel = jax.vmap(spatial_segment_residual, in_axes=(0,) * 10 + (None, 0))
+    return kernel(r[a], d[a], m_start, r[b], d[b], m[b], state.forces, network.lengths, network.EI, frames, quad, twist)
 
 
 def socb_residual(state: SOCBState, network: Network, control: Control, frames: Float[Array, "S 2 3"],
@@ -167,14 +179,20 @@ def socb_residual(state: SOCBState, network: Network, control: Control, frames: 
     imbalance = routed_nodal_force(state.forces, network, control.load_factor * network.loads)
     support = support_rows(r, imbalance, network, control)
     end_moment = (m - junction_node - couple_node) * (length_ref / EI_ref)
-    director_error = d - director_targets(d, network)
     if network.dim == 2:  # angles agree modulo 2π (arctan2 of the reference wraps at ±π)
-        director_error = planar_turn(0.0, director_error)
+        director_error = planar_turn(0.0, d - director_targets(d, network))
         candidates = jnp.concatenate([support, director_error[:, None], end_moment[:, None]], axis=1)
+        return jnp.concatenate([seg.ravel(), candidates.ravel()[network.socb_rows]])
+    norm_row = 0.5 * (jnp.sum(d * d, axis=1) - 1.0)
+    torsion_free = jnp.sum(m * d, axis=1) * (length_ref / EI_ref)
+    if network.twisting:  # the whole frame is fixed at clamps and daughter bases
+        target_t, target_psi = twist_targets(state_tangents(d, 3), state.twists, network)
+        frame_error = planar_turn(target_psi, state.twists)
+        candidates = jnp.concatenate([support, norm_row[:, None], d - target_t, torsion_free[:, None], end_moment,
+                                      frame_error[:, None]], axis=1)
     else:
-        norm_row = 0.5 * (jnp.sum(d * d, axis=1) - 1.0)
-        torsion_free = jnp.sum(m * d, axis=1) * (length_ref / EI_ref)
-        candidates = jnp.concatenate([support, norm_row[:, None], director_error, torsion_free[:, None], end_moment], axis=1)
+        candidates = jnp.concatenate([support, norm_row[:, None], d - director_targets(d, network),
+                                      torsion_free[:, None], end_moment], axis=1)
     return jnp.concatenate([seg.ravel(), candidates.ravel()[network.socb_rows]])
 
 
@@ -193,9 +211,9 @@ def socb_structure(network: Network):
     director_width = 1 if d == 2 else 3
     unknown = np.concatenate([
         np.repeat(node_ids, d), np.repeat(node_ids, director_width), np.repeat(node_ids, director_width),
-        np.repeat(n_nodes + np.arange(n_seg), d),
+        np.repeat(n_nodes + np.arange(n_seg), d), node_ids[:n_nodes if network.twisting else 0],
     ])
-    seg_rows, width = (4, 4) if d == 2 else (7, 11)
+    seg_rows, width = (4, 4) if d == 2 else (9 if network.twisting else 7, node_row_width(network))
     rows = np.concatenate([np.repeat(n_nodes + np.arange(n_seg), seg_rows), np.asarray(network.socb_rows) // width])
     seg, attach = np.asarray(network.segments), np.asarray(network.attach)
     daughters = np.flatnonzero(attach != node_ids)
@@ -223,13 +241,13 @@ class SOCBModel(eqx.Module):
         else:
             directors, moments = net.tangents, jnp.zeros((net.n_nodes, 3))
         return SOCBState(positions=net.positions, directors=directors, moments=moments,
-                         forces=jnp.zeros((net.n_segments, net.dim)))
+                         forces=jnp.zeros((net.n_segments, net.dim)), twists=jnp.zeros(n_twists(net)))
 
     @property
     def n_unknowns(self) -> int:
         """Size of the flat state (host side, no tracing)."""
         net, w = self.network, (1 if self.network.dim == 2 else 3)
-        return net.n_nodes * (net.dim + 2 * w) + net.n_segments * net.dim
+        return net.n_nodes * (net.dim + 2 * w) + net.n_segments * net.dim + n_twists(net)
 
     def structure(self):
         """See :func:`socb_structure`."""

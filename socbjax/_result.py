@@ -140,7 +140,7 @@ class CompressionResult(eqx.Module):
             directors, curvatures = tangents, moments / EI[:, None]
         reactions = jnp.einsum("nij,nj->ni", jnp.asarray(net.position_projector), net_nodal_force(forces, net, net.loads))
         row = RESULTS.where(jnp.asarray(self.converged)[i], RESULTS.successful, RESULTS.not_reached)
-        state = SOCBState(positions=positions, directors=directors, moments=moments, forces=forces)
+        state = SOCBState(positions=positions, directors=directors, moments=moments, forces=forces, twists=jnp.zeros(0))
         zero = jnp.zeros((), jnp.int32)
         return Solution(positions=positions, tangents=tangents, angles=angles, moments=moments, curvatures=curvatures,
                         segment_forces=forces, reactions=reactions, result=row, iterations=jnp.asarray(self.iterations)[i],

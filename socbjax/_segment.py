@@ -49,10 +49,10 @@ import jax
 import jax.numpy as jnp
 from jaxtyping import Array, Float
 
-from ._geometry import sphere_exp, sphere_exp_differential_inverse, sphere_log_jet
+from ._geometry import orthonormal_complement, sphere_exp, sphere_exp_differential_inverse, sphere_log_jet
 from ._quadrature import SegmentQuadrature
 
-__all__ = ["planar_turn", "planar_segment_residual", "spatial_segment_residual", "spatial_segment_tangents", "planar_segment_angles",
+__all__ = ["frame_angle", "minimal_rotation", "planar_turn", "planar_segment_residual", "spatial_segment_residual", "spatial_segment_tangents", "planar_segment_angles",
            "planar_segment_curve", "spatial_segment_curve"]
 
 
@@ -114,17 +114,19 @@ def planar_segment_residual(
     return jnp.concatenate([length_eq, moment_eq[None], bending_eq[None]])
 
 
-def _end_jet(t, m, n, EI):
+def _end_jet(t, m, n, EI, twisting=False):
     t = t / jnp.linalg.norm(t)
     dt = jnp.cross(m, t) / EI
     ddt = (jnp.dot(n, t) * t - n) / EI - jnp.dot(dt, dt) * t
+    if twisting:  # the twisting moment M = m·t turns t' about t: + M t × t' / EI
+        ddt = ddt + jnp.dot(m, t) * jnp.cross(t, dt) / EI
     return t, dt, ddt
 
 
-def _spatial_interpolant(t_a, m_a, t_b, m_b, n, length, EI, basis):
+def _spatial_interpolant(t_a, m_a, t_b, m_b, n, length, EI, basis, twisting=False):
     """Mean tangent u, chart data w_a, w_b and the chart coordinates w at the basis points."""
-    t_a, dt_a, ddt_a = _end_jet(t_a, m_a, n, EI)
-    t_b, dt_b, ddt_b = _end_jet(t_b, m_b, n, EI)
+    t_a, dt_a, ddt_a = _end_jet(t_a, m_a, n, EI, twisting)
+    t_b, dt_b, ddt_b = _end_jet(t_b, m_b, n, EI, twisting)
     u = t_a + t_b
     u = u / jnp.linalg.norm(u)
     w_a, dw_a, ddw_a = sphere_log_jet(u, t_a, dt_a, ddt_a)
@@ -133,19 +135,51 @@ def _spatial_interpolant(t_a, m_a, t_b, m_b, n, length, EI, basis):
     return u, w_a, w_b, basis @ data  # [K, 3]
 
 
-def spatial_segment_tangents(t_a, m_a, t_b, m_b, n, length, EI, basis) -> Float[Array, "K 3"]:
+def spatial_segment_tangents(t_a, m_a, t_b, m_b, n, length, EI, basis, twisting=False) -> Float[Array, "K 3"]:
     """Unit tangents at the points tabulated by ``basis`` from the end data."""
-    u, _, _, w = _spatial_interpolant(t_a, m_a, t_b, m_b, n, length, EI, basis)
+    u, _, _, w = _spatial_interpolant(t_a, m_a, t_b, m_b, n, length, EI, basis, twisting)
     return jax.vmap(sphere_exp, in_axes=(None, 0))(u, w)
 
 
-def spatial_segment_curve(t_a, m_a, t_b, m_b, n, length, EI, basis, dbasis):
+def spatial_segment_curve(t_a, m_a, t_b, m_b, n, length, EI, basis, dbasis, twisting=False):
     """(t [K, 3], dt/ds [K, 3] in 1/µm): unit tangents of the interpolant and their arc-length
     derivative, t' = D exp_u(w) w', at the points of ``basis`` / ``dbasis``."""
-    u, _, _, w = _spatial_interpolant(t_a, m_a, t_b, m_b, n, length, EI, basis)
-    _, _, _, dw = _spatial_interpolant(t_a, m_a, t_b, m_b, n, length, EI, dbasis)
+    u, _, _, w = _spatial_interpolant(t_a, m_a, t_b, m_b, n, length, EI, basis, twisting)
+    _, _, _, dw = _spatial_interpolant(t_a, m_a, t_b, m_b, n, length, EI, dbasis, twisting)
     t, dt = jax.vmap(lambda wk, dwk: jax.jvp(lambda z: sphere_exp(u, z), (wk,), (dwk,)))(w, dw)
     return t, dt / length
+
+
+def minimal_rotation(a, b, v):
+    """The smallest rotation taking the unit vector a to the unit vector b (about a × b),
+    applied to v.  Singular only for b = −a."""
+    ab = a + b
+    return v + 2.0 * jnp.dot(a, v) * b - jnp.dot(ab, v) / (1.0 + jnp.dot(a, b)) * ab
+
+
+def frame_angle(t, e, d):
+    """Angle (rad) about the unit vector t from e to d (both ⊥ t)."""
+    return jnp.arctan2(jnp.dot(jnp.cross(e, d), t), jnp.dot(e, d))
+
+
+def _twist_rows(u, t_a, t_b, e_a, e_b, psi_a, psi_b, t, dt, m, chord_moment, length, EI, GJ, weights):
+    """The two Kirchhoff rows of a twisting segment: the moment balance about the chart axis
+    u (Eq. 8's third component) and the twist law.
+
+    The twist law compares the material frames at both ends.  With E(s) the frame carried
+    from a fixed f ⊥ u to t(s) by the smallest rotation (its twist rate about t is
+    ω = −u·(t × t')/(1 + u·t)), the material angle φ relative to E obeys φ' = τ − ω with
+    τ = m·t / GJ, and φ = ψ + α at a node whose frame is ψ from its reference director e.
+    So ψ_b + α_b − ψ_a − α_a + ∫ω ds = ∫ m·t/GJ ds (mod 2π)."""
+    f = orthonormal_complement(u)[0]  # any f ⊥ u: the law does not depend on it
+    alpha_a = frame_angle(t_a, minimal_rotation(u, t_a, f), e_a)
+    alpha_b = frame_angle(t_b, minimal_rotation(u, t_b, f), e_b)
+    omega = -jnp.einsum("i,ki->k", u, jnp.cross(t, dt)) / (1.0 + t @ u)
+    twist_rate = jnp.sum(m * t, axis=1) / GJ
+    turn = psi_b + alpha_b - psi_a - alpha_a + length * (weights @ omega)
+    twist_eq = jnp.arctan2(jnp.sin(turn), jnp.cos(turn)) - length * (weights @ twist_rate)
+    axial_eq = jnp.dot(u, chord_moment) * length / EI
+    return jnp.stack([axial_eq, twist_eq])
 
 
 def spatial_segment_residual(
@@ -160,14 +194,21 @@ def spatial_segment_residual(
     EI: Float[Array, ""],
     frame: Float[Array, "2 3"],
     quad: SegmentQuadrature,
+    twist=None,
 ) -> Float[Array, "7"]:
     """Residuals (Eq. 7 ×3, Eq. 8 ×2, Eq. 9 ×2) of one spatial segment, dimensionless.
 
     ``frame`` spans (approximately) the plane ⊥ the segment's mean tangent; it only selects
     which two independent combinations of the ⊥u components are returned, so the solution
     does not depend on it (it must merely not be parallel to u).
+
+    ``twist``: None for the torsion-free rod, or for the Kirchhoff rod with twist
+    (ψ_a, ψ_b, e_a, e_b, GJ): the material-frame angles at both ends (rad) about the
+    reference directors e_a, e_b (⊥ t_a, t_b) and the torsional stiffness (pN·µm²); then two
+    more rows follow (:func:`_twist_rows`) and m·t is the twisting moment.
     """
-    u, w_a, w_b, w = _spatial_interpolant(t_a, m_a, t_b, m_b, n, length, EI, jnp.asarray(quad.basis))
+    twisting = twist is not None
+    u, w_a, w_b, w = _spatial_interpolant(t_a, m_a, t_b, m_b, n, length, EI, jnp.asarray(quad.basis), twisting)
     t = jax.vmap(sphere_exp, in_axes=(None, 0))(u, w)  # [K, 3]
     weights = jnp.asarray(quad.weights)
     chord = r_b - r_a
@@ -181,4 +222,12 @@ def spatial_segment_residual(
     m = m_a[None, :] - jnp.cross(offsets, n[None, :])
     rates = jax.vmap(sphere_exp_differential_inverse, in_axes=(None, 0, 0))(u, w, jnp.cross(m, t))
     bending_eq = perp(EI * (w_b - w_a) - length * (weights @ rates)) / EI
-    return jnp.concatenate([length_eq, moment_eq, bending_eq])
+    if not twisting:
+        return jnp.concatenate([length_eq, moment_eq, bending_eq])
+    psi_a, psi_b, e_a, e_b, GJ = twist
+    _, _, _, dw = _spatial_interpolant(t_a, m_a, t_b, m_b, n, length, EI, jnp.asarray(quad.dbasis), twisting)
+    dt = jax.vmap(lambda wk, dwk: jax.jvp(lambda z: sphere_exp(u, z), (wk,), (dwk,))[1])(w, dw) / length
+    ta, tb = t_a / jnp.linalg.norm(t_a), t_b / jnp.linalg.norm(t_b)
+    extra = _twist_rows(u, ta, tb, e_a, e_b, psi_a, psi_b, t, dt, m, m_b - m_a + jnp.cross(chord, n), length, EI, GJ,
+                        weights)
+    return jnp.concatenate([length_eq, moment_eq, bending_eq, extra])

@@ -172,7 +172,8 @@ def _package(model, x, stats, state0) -> Solution:
         curvatures = moments / EI
     else:
         angles = jnp.stack([jnp.arctan2(tangents[:, 1], tangents[:, 0]), jnp.arcsin(jnp.clip(tangents[:, 2], -1, 1))], -1)
-        curvatures = moments / EI[:, None]
+        bending = moments - jnp.sum(moments * tangents, axis=1, keepdims=True) * tangents  # without the twisting part
+        curvatures = bending / EI[:, None]
     reactions = net_nodal_force(state.forces, net, load_factor * net.loads)  # the force the support applies
     reactions = jnp.einsum("nij,nj->ni", jnp.asarray(net.position_projector), reactions)
     return Solution(positions=state.positions, tangents=tangents, angles=angles, moments=moments, curvatures=curvatures,
