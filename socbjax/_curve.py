@@ -75,8 +75,9 @@ def _smooth(network, tangents, moments, forces, sigma):
         t = jnp.stack([jnp.cos(theta), jnp.sin(theta)], axis=-1)
         dt = dtheta[..., None] * jnp.stack([-jnp.sin(theta), jnp.cos(theta)], axis=-1)
         return t, dt
-    return jax.vmap(spatial_segment_curve, in_axes=(0,) * 7 + (None, None))(
-        tangents[a], moments[a], tangents[b], moments[b], forces, network.lengths, network.EI, basis, dbasis)
+    return jax.vmap(spatial_segment_curve, in_axes=(0,) * 7 + (None, None, None))(
+        tangents[a], moments[a], tangents[b], moments[b], forces, network.lengths, network.EI, basis, dbasis,
+        network.twisting)
 
 
 def filament_curve(network, positions, tangents, moments, forces, *, points_per_segment: int = 16,

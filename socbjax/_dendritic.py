@@ -96,7 +96,7 @@ class _Grower:
             tip = new
         return tip
 
-    def build(self, EI, perturbation, seed) -> Network:
+    def build(self, EI, perturbation, seed, GJ=None) -> Network:
         n, d = len(self.pos), self.dim
         fixed = [np.zeros((0, d)) for _ in range(n)]
         for i in [0, *self.pinned]:
@@ -106,7 +106,7 @@ class _Grower:
         return _finish(make_network(
             np.array(self.pos), np.array(self.tan), np.array(self.segs), np.array(self.lengths), EI,
             fixed_directions=fixed, clamped=clamped, attach=self.attach or None, probe=[0],
-            probe_direction=np.eye(d)[-1], strand=np.array(self.strand),
+            probe_direction=np.eye(d)[-1], strand=np.array(self.strand), GJ=GJ,
         ), perturbation, seed)
 
 
@@ -178,6 +178,7 @@ def unit_dendritic_mesh(
     dim: int = 3,
     perturbation: float = 0.0,
     daughter_segments: int | None = None,
+    GJ: float | None = None,
 ) -> Network:
     """Paper Fig. 6a: a mother from the probe-bound nucleation point (node 0, clamped) along
     +z to the surface at z = ``mother_length``, hinged there, and a daughter from the
@@ -194,6 +195,9 @@ def unit_dendritic_mesh(
     ``daughter_segments``: split the daughter into this many equal segments (default: pieces
     of ``segment_length``).  ``EI``, ``perturbation`` and ``branch_angle`` may be traced JAX
     values (``branch_angle`` then needs ``daughter_segments``: the count is topology).
+    ``GJ`` (pN·µm², e.g. actin's 8e-3): in 3D a Kirchhoff rod with twist, the junction fixing
+    the daughter's whole frame in the mother's (see :func:`socbjax.make_network`); None
+    (default): torsion-free.
 
     Limits (checked before anything is built or traced; ``TypeError`` for a wrong type,
     ``ValueError`` for a wrong value, naming the argument): ``EI``, ``mother_length``,
@@ -233,7 +237,7 @@ def unit_dendritic_mesh(
     clamped[0] = True
     net = make_network(positions, tangents, segments, xp.concatenate([xp.full(m, ell), xp.asarray(pieces)]), EI,
                        fixed_directions=fixed, clamped=clamped, attach=[(m // 2, m + 1)], probe=[0],
-                       probe_direction=axis, strand=np.repeat([0, 1], [m, k]))
+                       probe_direction=axis, strand=np.repeat([0, 1], [m, k]), GJ=GJ)
     return _finish(net, perturbation, 0)
 
 
@@ -295,6 +299,7 @@ def dendritic_outcrop(
     dim: int = 3,
     perturbation: float = 1e-4,
     max_redraws: int = 100,
+    GJ: float | None = None,
 ) -> Network:
     """Paper Fig. 7a: a dendritic actin outcrop grown from one nucleation seed on the probe.
 
@@ -303,7 +308,8 @@ def dendritic_outcrop(
     ``segment_length`` node spacing; ``branch_angle`` daughter–mother angle; ``EI``;
     ``seed`` of the azimuths (same seed, same network); ``dim`` 3 or 2; ``perturbation``
     lateral force per strand (default 1e-4 pN, well below thermal forces k_BT/ℓ ≈ 8e-3 pN);
-    ``max_redraws`` per daughter.  See the module docstring for the growth rules.
+    ``max_redraws`` per daughter; ``GJ`` torsional stiffness (pN·µm², None: torsion-free;
+    see :func:`unit_dendritic_mesh`).  See the module docstring for the growth rules.
     Strand ends on the surface are the pinned nodes other than the probe node 0.
 
     Limits (checked before growing; ``TypeError`` for a wrong type, ``ValueError`` for a
@@ -322,7 +328,7 @@ def dendritic_outcrop(
     phi = _angle(branch_angle, high=90.0, why=": the first daughter branches off the mother, which grows along +z, and "
                  "must head toward the surface")
     g = _grow_outcrop(generations, gap, growth, ell, phi, np.random.default_rng(seed), dim, max_redraws)
-    return g.build(EI, perturbation, seed)
+    return g.build(EI, perturbation, seed, GJ)
 
 
 def _future_segments(growing, g, gap, growth, ell, remaining, first) -> int:

@@ -18,6 +18,7 @@ from ._checks import check_int, check_vector, is_traced
 from ._curve import FilamentCurve, filament_curve
 from ._network import Network
 from ._solution import RESULTS, result_message
+from ._twist import material_frames
 
 __all__ = ["Solution", "node_stiffness"]
 
@@ -72,6 +73,16 @@ class Solution(eqx.Module):
     def converged(self) -> Array:
         """Boolean array (traced under jit): the full load was reached."""
         return self.result == RESULTS.successful
+
+    def material_frames(self) -> Array:
+        """[N, 3, 3] material frames at the nodes, rows (t, d1, d2), of a twisting network
+        (3D, built with ``GJ=``); d1 is the reference director ``orthonormal_complement(
+        tangent)[0]`` carried along with the rod.  ``ValueError`` for other networks (a
+        torsion-free rod has no material frame)."""
+        if not self.network.twisting or self.model != "socb":
+            raise ValueError("material_frames needs a twisting network (3D, built with GJ=) solved with model='socb'; "
+                             "a torsion-free rod has no material frame")
+        return material_frames(self.tangents, self.state.twists, self.network)
 
     @property
     def status_message(self) -> str:

@@ -389,7 +389,7 @@ def _write_network(f: h5py.File, network: Network) -> None:
     for name in DIFFERENTIABLE_FIELDS:
         _dataset(g, name, _as_storable(f"network.{name}", getattr(network, name)), UNITS.get(f"network/{name}"))
     for name in TOPOLOGY_FIELDS:
-        _dataset(g, name, np.asarray(getattr(network, name)))
+        _dataset(g, name, np.asarray(getattr(network.topology, name)))
 
 
 def save(result: CompressionResult, path) -> Path:

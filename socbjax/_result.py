@@ -129,6 +129,10 @@ class CompressionResult(eqx.Module):
     def solution(self, i: int) -> Solution:
         """Row ``i`` as a :class:`socbjax.Solution` (curve, end rotations, deflection, reactions)."""
         net = self.network
+        if net.twisting:
+            raise NotImplementedError("CompressionResult.solution: the path of a twisting network (built with GJ=) "
+                                      "does not record the material-frame angles yet; solve the state you need with "
+                                      "socbjax.solve, or use the recorded positions, tangents, moments and forces")
         i = int(i) if not isinstance(i, (jnp.ndarray, np.ndarray)) else i
         positions, tangents, moments, forces = (self.positions[i], self.tangents[i], self.moments[i], self.segment_forces[i])
         EI = node_stiffness(net)
