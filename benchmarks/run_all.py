@@ -31,6 +31,7 @@ SCRIPTS = [
     "fit_recovery",
     "lawn_throughput",
     "thermal_compression",
+    "twist_unit_mesh",
     "peers/elastica_comparison",  # PyElastica columns only with the extra socbjax[peers]
 ]
 

@@ -23,6 +23,7 @@ __all__ = [
     "sphere_exp_differential_inverse",
     "rotation_vector",
     "orthonormal_complement",
+    "minimal_rotation",
 ]
 
 _SMALL = 1e-2  # squared-angle threshold below which Taylor series are used (error < 1e-16)
@@ -102,6 +103,15 @@ def rotation_vector(a: Float[Array, "3"], b: Float[Array, "3"]) -> Float[Array, 
     """Rotation vector (angle × unit axis) of the smallest rotation taking direction a to b."""
     axb = jnp.cross(a, b)
     return _angle_over_sine(jnp.dot(axb, axb), jnp.dot(a, b)) * axb
+
+
+def minimal_rotation(a: Array, b: Array, v: Array) -> Array:
+    """The smallest rotation taking the unit vector a to the unit vector b (about a × b),
+    applied to v (any leading batch shape, vectors on the last axis).  Singular only for
+    b = −a."""
+    ab = a + b
+    dot = lambda x, y: jnp.sum(x * y, -1, keepdims=True)  # noqa: E731
+    return v + 2.0 * dot(a, v) * b - dot(ab, v) / (1.0 + dot(a, b)) * ab
 
 
 def orthonormal_complement(u: Float[Array, "3"]) -> Float[Array, "2 3"]:

@@ -13,14 +13,16 @@ A junction ties a daughter's base node to a node of its mother strand:
 * moments — the daughter's base moment is handed to the mother (:func:`moment_transfer`):
   subtracted from the start moment of the mother segment that leaves the junction, or, where
   none leaves, from the mother node's end-moment equation.  In 3D the component along the
-  mother tangent (a twist, which the torsion-free rod cannot carry) is dropped.
+  mother tangent (a twist, which the torsion-free rod cannot carry) is dropped; a twisting
+  network (built with ``GJ=``) keeps it and fixes the daughter's whole frame in the mother's
+  material frame instead (:mod:`socbjax._twist`).
 
 Nodal couples (external, fixed-direction "dead" end moments, pN·µm) enter the same way as a
 daughter's moment (:func:`nodal_couple_transfer`): the internal moment jumps by −C across a
 node carrying the couple C, so the segment leaving the node starts with m − C and at a node
 where no segment leaves the end-moment equation becomes m = C.  In 3D the torsion-free rod
 carries the bending part of C exactly; a twisting component (C·t ≠ 0 at equilibrium) has no
-torsional stiffness to act on and needs the Kirchhoff rod of the twist issue.
+torsional stiffness to act on there, and acts on GJ in a twisting network.
 
 Host-side functions take and return numpy arrays (topology is concrete); the traced ones take
 the network and the current state.  Units: pN·µm for moments.
@@ -33,6 +35,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from ._checks import GEOMETRY_RTOL, MIN_BRANCH_ANGLE, check_index_array
+from ._geometry import minimal_rotation
 
 __all__ = ["check_junction_geometry", "check_junctions", "director_targets", "moment_transfer", "nodal_couple_transfer", "transfer_segments"]
 
@@ -121,15 +124,6 @@ def _unit(v):
     return v / jnp.linalg.norm(v, axis=-1, keepdims=True)
 
 
-def _transport(a, b, v):
-    """Minimal rotation taking unit a to unit b (about a × b), applied to v.  Singular only
-    for b = −a (a mother tangent reversed by 180° at a junction)."""
-    ab = a + b
-    return v + 2.0 * jnp.sum(a * v, -1, keepdims=True) * b - jnp.sum(ab * v, -1, keepdims=True) / (
-        1.0 + jnp.sum(a * b, -1, keepdims=True)
-    ) * ab
-
-
 def director_targets(directors, network):
     """Prescribed directors [N] (2D angles) or [N, 3]: the reference one at clamps; at a
     daughter base the reference daughter direction carried along with the mother's current
@@ -140,7 +134,7 @@ def director_targets(directors, network):
         ref = jnp.arctan2(network.tangents[:, 1], network.tangents[:, 0])
         offset = jnp.arctan2(jnp.sin(ref - ref[J]), jnp.cos(ref - ref[J]))
         return jnp.where(attached, directors[J] + offset, ref)
-    carried = _transport(network.tangents[J], _unit(directors[J]), network.tangents)
+    carried = minimal_rotation(network.tangents[J], _unit(directors[J]), network.tangents)
     return jnp.where(attached[:, None], carried, network.tangents)
 
 

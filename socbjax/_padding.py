@@ -116,6 +116,9 @@ def pad_outcrop(network: Network, generations: int, *, pieces: int = 2) -> tuple
     growth needs more than ``pieces`` segments)."""
     if not isinstance(network, Network):
         raise TypeError(f"network must be a socbjax Network (a dendritic_outcrop), got {type(network).__name__}")
+    if network.twisting:
+        raise ValueError("pad_outcrop: the outcrop is a twisting network (built with GJ=), which padding does not carry "
+                         "yet; compress it unpadded (socbjax.compress)")
     if is_traced(network.natural_curvature) or np.any(np.asarray(network.natural_curvature) != 0):
         raise ValueError("pad_outcrop: the outcrop has natural curvature (e.g. thermal_network), which padding does not "
                          "carry yet; compress curved outcrops unpadded (socbjax.compress)")

@@ -25,7 +25,12 @@ network's mean l and EI):
   - 2D: θ = θ_ref where clamped; m = (handed-over moments) at free/pinned ends;
   - 3D: |t|² = 1 (or t = t_ref where clamped); m·t = 0 (or the end moment at free ends).
 
-Count (clamped–free chain, N nodes): 2D 6N − 2 unknowns and equations, 3D 12N − 3.
+A twisting network (3D, built with ``GJ=``; :mod:`socbjax._twist`) adds per node the frame
+angle ψ (``SOCBState.twists``), per segment the third component of Eq. 8 and the twist law
+(:mod:`socbjax._segment`), and drops m·t = 0: clamps and daughter bases prescribe ψ.
+
+Count (clamped–free chain, N nodes): 2D 6N − 2 unknowns and equations, 3D 12N − 3, 3D with
+twist 13N − 3.
 """
 
 from __future__ import annotations

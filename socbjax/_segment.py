@@ -49,10 +49,10 @@ import jax
 import jax.numpy as jnp
 from jaxtyping import Array, Float
 
-from ._geometry import orthonormal_complement, sphere_exp, sphere_exp_differential_inverse, sphere_log_jet
+from ._geometry import minimal_rotation, orthonormal_complement, sphere_exp, sphere_exp_differential_inverse, sphere_log_jet
 from ._quadrature import SegmentQuadrature
 
-__all__ = ["frame_angle", "minimal_rotation", "planar_turn", "planar_segment_residual", "spatial_segment_residual", "spatial_segment_tangents", "planar_segment_angles",
+__all__ = ["frame_angle", "planar_turn", "planar_segment_residual", "spatial_segment_residual", "spatial_segment_tangents", "planar_segment_angles",
            "planar_segment_curve", "spatial_segment_curve"]
 
 
@@ -148,13 +148,6 @@ def spatial_segment_curve(t_a, m_a, t_b, m_b, n, length, EI, basis, dbasis, twis
     _, _, _, dw = _spatial_interpolant(t_a, m_a, t_b, m_b, n, length, EI, dbasis, twisting)
     t, dt = jax.vmap(lambda wk, dwk: jax.jvp(lambda z: sphere_exp(u, z), (wk,), (dwk,)))(w, dw)
     return t, dt / length
-
-
-def minimal_rotation(a, b, v):
-    """The smallest rotation taking the unit vector a to the unit vector b (about a × b),
-    applied to v.  Singular only for b = −a."""
-    ab = a + b
-    return v + 2.0 * jnp.dot(a, v) * b - jnp.dot(ab, v) / (1.0 + jnp.dot(a, b)) * ab
 
 
 def frame_angle(t, e, d):

@@ -59,6 +59,8 @@ def make_model(network: Network, model: str = "socb", *, quadrature_order: int =
         if network.n_junctions or network.has_probe:
             raise ValueError("the jointed baseline supports single filaments only (no branch junctions or probe); "
                              "use model='socb'")
+        if network.twisting:
+            raise ValueError("the jointed baseline is torsion-free; a network built with GJ= needs model='socb'")
         return JointedModel(network)
     raise ValueError(f"unknown model {model!r}; use one of {MODELS}")
 

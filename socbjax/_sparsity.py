@@ -59,7 +59,7 @@ def template_model(model):
     values = {}
     for name in DIFFERENTIABLE_FIELDS:
         shape = getattr(net, name).shape
-        v = rng.uniform(0.5, 1.5, shape) if name in ("lengths", "EI") else rng.normal(size=shape)
+        v = rng.uniform(0.5, 1.5, shape) if name in ("lengths", "EI", "GJ") else rng.normal(size=shape)
         if name == "tangents":
             v = v / np.linalg.norm(v, axis=-1, keepdims=True)
         values[name] = jnp.asarray(v)

@@ -18,8 +18,8 @@ from __future__ import annotations
 import jax
 import jax.numpy as jnp
 
-from ._geometry import orthonormal_complement
-from ._segment import frame_angle, minimal_rotation
+from ._geometry import minimal_rotation, orthonormal_complement
+from ._segment import frame_angle
 
 __all__ = ["carried_directors", "material_frames", "twist_targets"]
 
@@ -38,7 +38,7 @@ def _reference_frames(network):
 def carried_directors(tangents, network):
     """[N, 3] reference directors carried to the current unit ``tangents`` [N, 3]."""
     ref = _reference_frames(network)
-    return jax.vmap(minimal_rotation)(ref[:, 0], tangents, ref[:, 1])
+    return minimal_rotation(ref[:, 0], tangents, ref[:, 1])
 
 
 def material_frames(tangents, twists, network):
