@@ -69,17 +69,27 @@ def main(argv=None) -> int:
               f"{r['max_twisting_moment_pNum']:.3g}", f"{r['max_out_of_plane_um']:.3g}", f"{r['wall_s']:.1f}"]
              for r in rows]
     _common.print_table(headers, table, title=f"3D unit mesh compressed by {U} µm: twist against torsion-free")
-    fig, ax = _common.new_figure((6.4, 4.4))
+    fig, (ax, diff) = _common.new_figure((11.0, 4.2), ncols=2)
+    free = rows[0]
     for k, r in enumerate(rows):
         label = "torsion-free" if r["GJ"] is None else f"GJ = {r['GJ']:g} pN·µm²" + (" (actin)" if r["GJ"] == 8e-3 else "")
-        ax.plot(r["u"], r["F"], color="k" if r["GJ"] is None else f"C{k}", lw=2.0 if r["GJ"] is None else 1.2,
-                ls="-" if r["GJ"] is None else "--", label=label)
+        style = dict(color="k" if r["GJ"] is None else f"C{k}", lw=2.0 if r["GJ"] is None else 1.2,
+                     ls="-" if r["GJ"] is None else "--", label=label)
+        ax.plot(r["u"], r["F"], **style)
+        if r["GJ"] is not None and np.all(np.diff(r["u"]) > 0) and np.all(np.diff(free["u"]) > 0):
+            grid = np.linspace(0.01 * U, min(r["u"][-1], free["u"][-1]), 200)  # both paths are monotone in u here
+            diff.plot(grid, np.interp(grid, r["u"], r["F"]) - np.interp(grid, free["u"], free["F"]), **style)
     ax.set_xlabel("probe displacement u (µm)")
     ax.set_ylabel("probe force F (pN)")
-    ax.set_title("3D unit mesh (EI 0.071 pN·µm², 70°): twist vs torsion-free")
+    ax.set_title("3D unit mesh (EI 0.071 pN·µm², 70°)")
     ax.set_xlim(0, U)
     ax.set_ylim(bottom=0)
-    ax.legend(fontsize=8)
+    ax.legend(fontsize=8, loc="lower right")
+    diff.axhline(0.0, color="k", lw=0.8)
+    diff.set_xlabel("probe displacement u (µm)")
+    diff.set_ylabel("F(GJ) − F(torsion-free) (pN)")
+    diff.set_title("the change that twist makes")
+    diff.set_xlim(0, U)
     _common.save_figure(fig, args.out, "twist_unit_mesh")
     _common.write_json(args.out, "twist_unit_mesh", args, {"displacement_um": U, "perturbation_pN": PERTURBATION,
                                                            "rows": rows})
