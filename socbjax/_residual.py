@@ -168,7 +168,7 @@ def _segment_rows(state, network, quad, frames, m_start):
     twist = None
     if network.twisting:
         e = carried_directors(state_tangents(d, 3), network)
-        twist = (state.twists[a], state.twists[b], e[a], e[b], network.GJ)
+        twist = (state.twists[a], state.twists[b], e[a], e[b], network.GJ, network.natural_curvature)
     kernel = jax.vmap(spatial_segment_residual, in_axes=(0,) * 10 + (None, 0))
     return kernel(r[a], d[a], m_start, r[b], d[b], m[b], state.forces, network.lengths, network.EI, frames, quad, twist)
 

@@ -125,14 +125,19 @@ def _end_jet(t, m, n, EI, twisting=False):
 
 def _spatial_interpolant(t_a, m_a, t_b, m_b, n, length, EI, basis, twisting=False):
     """Mean tangent u, chart data w_a, w_b and the chart coordinates w at the basis points."""
-    t_a, dt_a, ddt_a = _end_jet(t_a, m_a, n, EI, twisting)
-    t_b, dt_b, ddt_b = _end_jet(t_b, m_b, n, EI, twisting)
+    u, w_a, w_b, data = _chart(_end_jet(t_a, m_a, n, EI, twisting), _end_jet(t_b, m_b, n, EI, twisting), length)
+    return u, w_a, w_b, basis @ data
+
+
+def _chart(jet_a, jet_b, length):
+    """(u, w_a, w_b, Hermite data [6, 3]) of the log-chart quintic from the end jets (t, t', t'')."""
+    (t_a, dt_a, ddt_a), (t_b, dt_b, ddt_b) = jet_a, jet_b
     u = t_a + t_b
     u = u / jnp.linalg.norm(u)
     w_a, dw_a, ddw_a = sphere_log_jet(u, t_a, dt_a, ddt_a)
     w_b, dw_b, ddw_b = sphere_log_jet(u, t_b, dt_b, ddt_b)
     data = jnp.stack([w_a, length * dw_a, length**2 * ddw_a, w_b, length * dw_b, length**2 * ddw_b])
-    return u, w_a, w_b, basis @ data  # [K, 3]
+    return u, w_a, w_b, data
 
 
 def spatial_segment_tangents(t_a, m_a, t_b, m_b, n, length, EI, basis, twisting=False) -> Float[Array, "K 3"]:
@@ -155,24 +160,62 @@ def frame_angle(t, e, d):
     return jnp.arctan2(jnp.dot(jnp.cross(e, d), t), jnp.dot(e, d))
 
 
-def _twist_rows(u, t_a, t_b, e_a, e_b, psi_a, psi_b, t, dt, m, chord_moment, length, EI, GJ, weights):
-    """The two Kirchhoff rows of a twisting segment: the moment balance about the chart axis
-    u (Eq. 8's third component) and the twist law.
+def _kirchhoff_jet(t, e, psi, m, n, EI, GJ, kappa0):
+    """End jet (t, t', t'') of a Kirchhoff rod and its material directors: t' = (m/EI + k) × t
+    with the natural curvature vector k = κ₁ d1 + κ₂ d2, and t'' from m' = −t × n and
+    k' = Ω × k (Ω = t × t' + τ t, τ = m·t/GJ + τ₀)."""
+    t = t / jnp.linalg.norm(t)
+    d1 = jnp.cos(psi) * e + jnp.sin(psi) * jnp.cross(t, e)
+    k = kappa0[0] * d1 + kappa0[1] * jnp.cross(t, d1)
+    curv = m / EI + k
+    dt = jnp.cross(curv, t)
+    omega = jnp.cross(t, dt) + (jnp.dot(m, t) / GJ + kappa0[2]) * t
+    ddt = jnp.cross(-jnp.cross(t, n) / EI + jnp.cross(omega, k), t) + jnp.cross(curv, dt)
+    return t, dt, ddt
 
-    The twist law compares the material frames at both ends.  With E(s) the frame carried
-    from a fixed f ⊥ u to t(s) by the smallest rotation (its twist rate about t is
+
+def _kirchhoff_rows(r_a, t_a, m_a, r_b, t_b, m_b, n, length, EI, frame, quad, twist):
+    """The nine rows of a twisting segment (see :func:`spatial_segment_residual`).
+
+    The material frame is followed along the segment: with E(s) the frame carried from a
+    fixed f ⊥ u to t(s) by the smallest rotation (twist rate about t:
     ω = −u·(t × t')/(1 + u·t)), the material angle φ relative to E obeys φ' = τ − ω with
-    τ = m·t / GJ, and φ = ψ + α at a node whose frame is ψ from its reference director e.
-    So ψ_b + α_b − ψ_a − α_a + ∫ω ds = ∫ m·t/GJ ds (mod 2π)."""
-    f = orthonormal_complement(u)[0]  # any f ⊥ u: the law does not depend on it
-    alpha_a = frame_angle(t_a, minimal_rotation(u, t_a, f), e_a)
-    alpha_b = frame_angle(t_b, minimal_rotation(u, t_b, f), e_b)
+    τ = m·t/GJ + τ₀, and φ = ψ + α at a node whose frame is ψ from its reference director e
+    (α: the angle from E to e).  The twist law is ψ_b + α_b − ψ_a − α_a + ∫ω ds = ∫τ ds
+    (mod 2π); φ at the quadrature points places the natural curvature vector there, which
+    enters Eq. 9 as EI t' = (m + EI k) × t."""
+    psi_a, psi_b, e_a, e_b, GJ, kappa0 = twist
+    jet_a = _kirchhoff_jet(t_a, e_a, psi_a, m_a, n, EI, GJ, kappa0)
+    jet_b = _kirchhoff_jet(t_b, e_b, psi_b, m_b, n, EI, GJ, kappa0)
+    u, w_a, w_b, data = _chart(jet_a, jet_b, length)
+    w, dw = jnp.asarray(quad.basis) @ data, jnp.asarray(quad.dbasis) @ data / length
+    t, dt = jax.vmap(lambda wk, dwk: jax.jvp(lambda z: sphere_exp(u, z), (wk,), (dwk,)))(w, dw)
+    weights, chord = jnp.asarray(quad.weights), r_b - r_a
+
+    def perp(v):
+        return frame @ (v - jnp.dot(u, v) * u)
+
+    offsets = length * (jnp.asarray(quad.integration) @ t)  # r(s_k) − r_a, [K, 3]
+    m = m_a[None, :] - jnp.cross(offsets, n[None, :])
+    f = orthonormal_complement(u)[0]  # any f ⊥ u: nothing depends on it
+    E = minimal_rotation(u, t, f)  # [K, 3]
+    alpha_a = frame_angle(jet_a[0], minimal_rotation(u, jet_a[0], f), e_a)
+    alpha_b = frame_angle(jet_b[0], minimal_rotation(u, jet_b[0], f), e_b)
     omega = -jnp.einsum("i,ki->k", u, jnp.cross(t, dt)) / (1.0 + t @ u)
-    twist_rate = jnp.sum(m * t, axis=1) / GJ
+    tau = jnp.sum(m * t, axis=1) / GJ + kappa0[2]
+    phi = psi_a + alpha_a + length * (jnp.asarray(quad.integration) @ (tau - omega))
+    d1 = jnp.cos(phi)[:, None] * E + jnp.sin(phi)[:, None] * jnp.cross(t, E)
+    k = kappa0[0] * d1 + kappa0[1] * jnp.cross(t, d1)
+    rates = jax.vmap(sphere_exp_differential_inverse, in_axes=(None, 0, 0))(u, w, jnp.cross(m + EI * k, t))
     turn = psi_b + alpha_b - psi_a - alpha_a + length * (weights @ omega)
-    twist_eq = jnp.arctan2(jnp.sin(turn), jnp.cos(turn)) - length * (weights @ twist_rate)
-    axial_eq = jnp.dot(u, chord_moment) * length / EI
-    return jnp.stack([axial_eq, twist_eq])
+    balance = m_b - m_a + jnp.cross(chord, n)
+    return jnp.concatenate([
+        (chord - length * (weights @ t)) / length,
+        perp(balance) * length / EI,
+        perp(EI * (w_b - w_a) - length * (weights @ rates)) / EI,
+        jnp.stack([jnp.dot(u, balance) * length / EI,
+                   jnp.arctan2(jnp.sin(turn), jnp.cos(turn)) - length * (weights @ tau)]),
+    ])
 
 
 def spatial_segment_residual(
@@ -196,12 +239,15 @@ def spatial_segment_residual(
     does not depend on it (it must merely not be parallel to u).
 
     ``twist``: None for the torsion-free rod, or for the Kirchhoff rod with twist
-    (ψ_a, ψ_b, e_a, e_b, GJ): the material-frame angles at both ends (rad) about the
-    reference directors e_a, e_b (⊥ t_a, t_b) and the torsional stiffness (pN·µm²); then two
-    more rows follow (:func:`_twist_rows`) and m·t is the twisting moment.
+    (ψ_a, ψ_b, e_a, e_b, GJ, κ₀): the material-frame angles at both ends (rad) about the
+    reference directors e_a, e_b (⊥ t_a, t_b), the torsional stiffness (pN·µm²) and the
+    natural curvature and twist (κ₁, κ₂, τ₀) (1/µm, on d1, d2, t); then two more rows
+    follow (Eq. 8 about u, the twist law; :func:`_kirchhoff_rows`) and m·t is the twisting
+    moment.
     """
-    twisting = twist is not None
-    u, w_a, w_b, w = _spatial_interpolant(t_a, m_a, t_b, m_b, n, length, EI, jnp.asarray(quad.basis), twisting)
+    if twist is not None:
+        return _kirchhoff_rows(r_a, t_a, m_a, r_b, t_b, m_b, n, length, EI, frame, quad, twist)
+    u, w_a, w_b, w = _spatial_interpolant(t_a, m_a, t_b, m_b, n, length, EI, jnp.asarray(quad.basis))
     t = jax.vmap(sphere_exp, in_axes=(None, 0))(u, w)  # [K, 3]
     weights = jnp.asarray(quad.weights)
     chord = r_b - r_a
@@ -215,12 +261,4 @@ def spatial_segment_residual(
     m = m_a[None, :] - jnp.cross(offsets, n[None, :])
     rates = jax.vmap(sphere_exp_differential_inverse, in_axes=(None, 0, 0))(u, w, jnp.cross(m, t))
     bending_eq = perp(EI * (w_b - w_a) - length * (weights @ rates)) / EI
-    if not twisting:
-        return jnp.concatenate([length_eq, moment_eq, bending_eq])
-    psi_a, psi_b, e_a, e_b, GJ = twist
-    _, _, _, dw = _spatial_interpolant(t_a, m_a, t_b, m_b, n, length, EI, jnp.asarray(quad.dbasis), twisting)
-    dt = jax.vmap(lambda wk, dwk: jax.jvp(lambda z: sphere_exp(u, z), (wk,), (dwk,))[1])(w, dw) / length
-    ta, tb = t_a / jnp.linalg.norm(t_a), t_b / jnp.linalg.norm(t_b)
-    extra = _twist_rows(u, ta, tb, e_a, e_b, psi_a, psi_b, t, dt, m, m_b - m_a + jnp.cross(chord, n), length, EI, GJ,
-                        weights)
-    return jnp.concatenate([length_eq, moment_eq, bending_eq, extra])
+    return jnp.concatenate([length_eq, moment_eq, bending_eq])
