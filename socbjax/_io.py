@@ -104,6 +104,7 @@ UNITS = {
     "network/lengths": "µm",
     "network/natural_curvature": "1/µm",
     "network/GJ": "pN·µm²",
+    "network/directors": "1",
     "network/EI": "pN·µm²",
     "network/loads": "pN",
     "network/couples": "pN·µm",

@@ -19,9 +19,11 @@ import re
 from pathlib import Path
 
 import h5py
+import jax
 import jax.numpy as jnp
 import numpy as np
 
+from ._geometry import orthonormal_complement
 from ._hdf5 import InvalidFile, Reader, parse_json
 from ._network import DIFFERENTIABLE_FIELDS, Network, Topology
 from ._result import PHASES, CompressionResult, LimitPoint
@@ -47,14 +49,14 @@ _PATH_LAYOUT = {
 PATH_FIELDS = tuple(_PATH_LAYOUT)
 _NETWORK_LAYOUT = {
     "positions": ("f", "Nd"), "segments": ("iu", "S2"), "tangents": ("f", "Nd"), "lengths": ("f", "S"),
-    "EI": ("f", "S"), "loads": ("f", "Nd"), "couples": ("f", "Nm"), "natural_curvature": ("f", "Sm"), "GJ": ("f", "S"),
+    "EI": ("f", "S"), "loads": ("f", "Nd"), "couples": ("f", "Nm"), "natural_curvature": ("f", "Sm"), "GJ": ("f", "S"), "directors": ("f", "Nd"),
     "position_projector": ("f", "Ndd"),
     "clamped": ("b", "N"), "moment_free": ("b", "N"), "attach": ("iu", "N"), "transfer_segment": ("iu", "N"),
     "leaving_segment": ("iu", "N"), "probe": ("b", "N"), "probe_direction": ("f", "d"), "strand": ("iu", "S"),
     "socb_rows": ("iu", "R"), "twisting": ("b", "N"),
 }
-_OPTIONAL = {1: ("couples", "leaving_segment", "natural_curvature", "GJ", "twisting"),
-             2: ("natural_curvature", "GJ", "twisting")}  # absent before format 3
+_OPTIONAL = {1: ("couples", "leaving_segment", "natural_curvature", "GJ", "twisting", "directors"),
+             2: ("natural_curvature", "GJ", "twisting", "directors")}  # absent before format 3
 _KIND_NAMES = {"f": "float32/float64", "b": "bool", "iu": "integer", "s": "string"}
 _LIMIT_DTYPES = {"str": "s", "int": "iu", "float": "f"}  # dtype kinds of the LimitPoint fields
 
@@ -172,6 +174,9 @@ def _read_network(reader: Reader, version: int) -> tuple[Network, _Sizes]:
     a.setdefault("couples", np.zeros((n,) if dim == 2 else (n, 3)))
     a.setdefault("natural_curvature", np.zeros((s,) if dim == 2 else (s, 3)))
     a.setdefault("GJ", np.zeros(s))
+    if "directors" not in a:  # before format 3: the default reference directors
+        a["directors"] = (np.zeros((n, 2)) if dim == 2 else
+                          np.asarray(jax.vmap(orthonormal_complement)(jnp.asarray(a["tangents"], jnp.float64))[:, 0]))
     values = {name: jnp.asarray(a.pop(name)) for name in DIFFERENTIABLE_FIELDS}
     return Network(**values, topology=Topology(dim=dim, **a)), sizes
 

@@ -45,6 +45,8 @@ from ._network_checks import (
     check_degrees,
     check_loops,
     check_natural_curvature,
+    check_rest_frames,
+    reference_directors,
     check_reference_state,
     check_segments,
     check_supported,
@@ -61,7 +63,8 @@ __all__ = ["DIFFERENTIABLE_FIELDS", "Network", "Padding", "Topology", "add_direc
            "node_row_width"]
 
 # Network arrays that carry values (traced, differentiable); everything else is topology.
-DIFFERENTIABLE_FIELDS = ("positions", "tangents", "lengths", "EI", "loads", "couples", "natural_curvature", "GJ")
+DIFFERENTIABLE_FIELDS = ("positions", "tangents", "lengths", "EI", "loads", "couples", "natural_curvature", "GJ",
+                         "directors")
 _STRUCTURE = ("segments", "position_projector", "clamped", "moment_free", "attach", "transfer_segment",
               "leaving_segment", "probe", "probe_direction", "strand", "socb_rows", "twisting")
 _DTYPES = {"position_projector": np.float64, "probe_direction": np.float64, "clamped": np.bool_, "moment_free": np.bool_,
@@ -147,10 +150,13 @@ class Network(eqx.Module):
     loads : [N, d] fixed external nodal forces (pN), e.g. a lateral perturbation.
     couples : 2D [N], 3D [N, 3] fixed external nodal couples (pN·µm).
     natural_curvature : 2D [S] curvature of each segment at rest (1/µm; each segment is a
-        circular arc when unloaded, 0: straight); 3D [S, 3], zero (3D filaments are
-        naturally straight in this version).
+        circular arc when unloaded, 0: straight); 3D [S, 3] the natural curvature and twist
+        (κ₁, κ₂, τ₀) on the material frame (d1, d2, t) (1/µm), twisting networks only.
     GJ : [S] torsional stiffness per segment (pN·µm²); used by 3D networks built with
         ``GJ=`` (``twisting``), zeros otherwise.
+    directors : 3D [N, 3] reference material director d1 at each node (unit, ⊥ tangent;
+        default ``orthonormal_complement(tangent)[0]``), used by twisting networks; 2D
+        [N, 2] zeros.
     topology : the static structure (``segments``, supports, junctions, probe, ...), whose
         arrays are also available as read-only numpy attributes of the network.
     padding : None, or the :class:`Padding` of a realisation padded to a common topology
@@ -165,6 +171,7 @@ class Network(eqx.Module):
     couples: Array
     natural_curvature: Array
     GJ: Float[Array, " S"]
+    directors: Array
     topology: Topology = eqx.field(static=True)
     padding: Padding | None = None
 
@@ -284,7 +291,7 @@ def _shapes(positions) -> tuple[int, int]:
 
 def make_network(positions, tangents, segments, lengths, EI, *, fixed_directions=None, clamped=None, attach=None,
                  probe=None, probe_direction=None, loads=None, couples=None, strand=None,
-                 natural_curvature=None, GJ=None) -> Network:
+                 natural_curvature=None, GJ=None, directors=None) -> Network:
     """Build and validate a :class:`Network`.
 
     Parameters
@@ -304,7 +311,11 @@ def make_network(positions, tangents, segments, lengths, EI, *, fixed_directions
     loads : [N, d] fixed external nodal forces (pN); couples : 2D [N] / 3D [N, 3] fixed
         external nodal couples (pN·µm).  strand : [S] non-negative integer strand ids.
     natural_curvature : 2D [S] or scalar, each segment's curvature at rest (1/µm, positive:
-        turning counter-clockwise; default 0, straight).  3D: [S, 3], zero only.
+        turning counter-clockwise; default 0, straight).  3D: [S, 3] (κ₁, κ₂, τ₀) on the
+        material frame (d1, d2, t), only with ``GJ``: each segment is then at rest a piece of
+        helix (an arc for τ₀ = 0, a twisted straight piece for κ = 0).
+    directors : 3D [N, 3] reference material directors d1 (unit, ⊥ the tangents), the
+        frames of the stress-free state (default: ``orthonormal_complement(tangent)[0]``).
     GJ : [S] or scalar torsional stiffness (pN·µm²).  In 3D it makes the network a
         Kirchhoff rod with twist: every node gets a material frame (its angle ψ about the
         tangent, from the reference director ``orthonormal_complement(tangent)[0]``), clamps
@@ -338,11 +349,12 @@ def make_network(positions, tangents, segments, lengths, EI, *, fixed_directions
     couples, _ = network_value("couples", couples, (n,) if dim == 2 else (n, 3), "pN·µm")
     natural_curvature, kappa_np = network_value("natural_curvature", natural_curvature, (s,) if dim == 2 else (s, 3),
                                                 "1/µm")
-    turn = check_natural_curvature(kappa_np, len_np, dim)
     twisting = GJ is not None and dim == 3
+    turn = check_natural_curvature(kappa_np, len_np, dim, twisting)
     GJ, _ = network_value("GJ", GJ, (s,), "pN·µm²", positive=True) if GJ is not None else (np.zeros(s), None)
     if tan_np is not None:
         tangents = tan_np = unit_tangents(tan_np)
+    directors, dir_np = reference_directors(directors, tangents, tan_np, n, dim)
     n_start, n_end = check_degrees(seg, n)
     degree = n_start + n_end
     clamped = node_flags("clamped", clamped, n)
@@ -358,7 +370,10 @@ def make_network(positions, tangents, segments, lengths, EI, *, fixed_directions
     attach_arr = check_junctions(concrete_structure("attach", attach), n, degree, n_end, n_start, clamped, fixed_any,
                                  probe_nodes)
     roots = check_loops(n, seg, attach_arr)
-    check_reference_state(pos_np, tan_np, seg, len_np, turn)
+    if twisting:
+        check_rest_frames(pos_np, tan_np, dir_np, seg, len_np, kappa_np)
+    else:
+        check_reference_state(pos_np, tan_np, seg, len_np, turn)
     check_junction_geometry(attach_arr, pos_np, tan_np, len_np)
     attached = attach_arr != np.arange(n)
     check_supported(roots, clamped, projector, dim)
@@ -374,7 +389,7 @@ def make_network(positions, tangents, segments, lengths, EI, *, fixed_directions
         twisting=np.full(n, twisting),
     )
     return Network(positions=positions, tangents=tangents, lengths=lengths, EI=EI, loads=loads, couples=couples,
-                   natural_curvature=natural_curvature, GJ=GJ, topology=topology)
+                   natural_curvature=natural_curvature, GJ=GJ, directors=directors, topology=topology)
 
 
 def add_direction(projector: np.ndarray, direction: np.ndarray) -> np.ndarray:

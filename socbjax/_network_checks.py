@@ -41,6 +41,9 @@ __all__ = [
     "check_degrees",
     "check_loops",
     "check_natural_curvature",
+    "check_rest_frames",
+    "reference_directors",
+    "rest_segment",
     "check_reference_state",
     "check_segments",
     "check_supported",
@@ -126,17 +129,23 @@ def unit_tangents(tangents: np.ndarray) -> np.ndarray:
     return np.where(rounding[:, None], tangents / norm[:, None], tangents)
 
 
-def check_natural_curvature(kappa, lengths, dim: int):
-    """The turn κ₀l [S] (rad) of each segment at rest, or None when it is traced; refuses
-    3D curvature (needs twist) and turns of half a circle or more per segment."""
+def check_natural_curvature(kappa, lengths, dim: int, twisting: bool = False):
+    """The turn κ₀l [S] (rad) of each segment at rest (2D), or None when it is traced;
+    refuses 3D curvature without twist (the torsion-free rod has no material frame to hold
+    it) and turns of half a circle or more per segment."""
     if kappa is None:
         return None
     if dim == 3:
-        if np.any(kappa != 0):
+        if np.any(kappa != 0) and not twisting:
             k = int(np.argmax(np.any(kappa != 0, axis=1)))
-            raise ValueError(f"natural_curvature[{k}] = {kappa[k].tolist()} 1/µm: 3D filaments are naturally straight "
-                             "in this version (a curved 3D rod needs its twist, not modelled yet); pass zeros or build "
-                             "the network in 2D")
+            raise ValueError(f"natural_curvature[{k}] = {kappa[k].tolist()} 1/µm: a naturally curved or twisted 3D "
+                             "filament needs its torsional stiffness: pass GJ= (e.g. actin's 8e-3 pN·µm²)")
+        bent = np.linalg.norm(kappa[:, :2], axis=1) * (1.0 if lengths is None else lengths)
+        if lengths is not None and np.any(bent >= np.pi):
+            k = int(np.argmax(bent >= np.pi))
+            raise ValueError(f"natural_curvature[{k}] = {kappa[k].tolist()} 1/µm bends segment {k} by "
+                             f"{np.degrees(bent[k]):.4g}° at rest; a segment turns by less than 180°: use more, shorter "
+                             "segments")
         return np.zeros(len(kappa))
     if lengths is None:
         return None if np.any(kappa != 0) else np.zeros(len(kappa))
@@ -342,3 +351,70 @@ def check_supported(roots: np.ndarray, clamped, projector, dim) -> None:
                 f"the piece of the network with nodes {nodes[:8].tolist()}{'...' if len(nodes) > 8 else ''} is not held "
                 "against rigid-body motion; clamp one of its nodes or pin at least two"
             )
+
+
+def reference_directors(directors, tangents, tan_np, n: int, dim: int):
+    """(directors [N, d], concrete copy or None): 3D reference material directors, unit and
+    ⊥ the tangents (default ``orthonormal_complement(tangent)[0]``); 2D zeros."""
+    if dim == 2:
+        if directors is not None:
+            raise ValueError("directors: planar filaments have no material director (they do not twist); leave it None")
+        return np.zeros((n, 2)), None
+    if directors is None:
+        from ._geometry import orthonormal_complement  # noqa: PLC0415 (JAX only when needed)
+        import jax  # noqa: PLC0415
+
+        value = jax.vmap(orthonormal_complement)(jnp.asarray(tangents))[:, 0]
+        return (value, None) if tan_np is None else (np.asarray(value), np.asarray(value))
+    arr, arr_np = network_value("directors", directors, (n, 3), "unit vectors")
+    if arr_np is None or tan_np is None:
+        return arr, None
+    norm = np.linalg.norm(arr_np, axis=1)
+    off = (np.abs(norm - 1.0) > UNIT_TANGENT_TOLERANCE) | (np.abs(np.sum(arr_np * tan_np, axis=1)) > 1e-6 * norm)
+    if off.any():
+        i = int(np.argmax(off))
+        raise ValueError(f"directors[{i}] = {arr_np[i].tolist()} must be a unit vector ⊥ tangents[{i}] = "
+                         f"{tan_np[i].tolist()} (the material director of the reference frame)")
+    arr_np = arr_np / norm[:, None]
+    return arr_np, arr_np
+
+
+def rest_segment(t_a, d1_a, kappa, length):
+    """(chord [3], R [3, 3]) of a segment at rest from its start frame (tangent t_a,
+    director d1_a): the frame turns at the constant Darboux vector Ω = κ₁ d1 + κ₂ d2 + τ₀ t
+    (the same from either end), so the end frame is R applied to the start frame and the
+    segment is a piece of helix about Ω (numpy)."""
+    d2_a = np.cross(t_a, d1_a)
+    omega = kappa[0] * d1_a + kappa[1] * d2_a + kappa[2] * t_a
+    rate = float(np.linalg.norm(omega))
+    if rate * length < 1e-12:
+        return length * t_a, np.eye(3)
+    axis, angle = omega / rate, rate * length
+    along = (t_a @ axis) * axis
+    across = t_a - along
+    chord = along * length + np.sin(angle) / rate * across + (1 - np.cos(angle)) / rate * np.cross(axis, across)
+    K = np.cross(np.eye(3), axis)  # rows e_i × axis: the matrix of v ↦ axis × v
+    R = np.eye(3) + np.sin(angle) * K + (1 - np.cos(angle)) * (K @ K)  # Rodrigues
+    return chord, R
+
+
+def check_rest_frames(positions, tangents, directors, segments: np.ndarray, lengths, kappa) -> None:
+    """A twisting network's reference state is stress-free: every segment is the piece of
+    helix of its (κ₁, κ₂, τ₀) from its start frame (tangent, director) to its end frame
+    (skipped where a value is traced)."""
+    if positions is None or tangents is None or directors is None or lengths is None or kappa is None:
+        return
+    roundoff = 64 * _EPS * max(float(np.max(np.abs(positions))), 1.0)
+    for k, (a, b) in enumerate(segments):
+        chord, R = rest_segment(tangents[a], directors[a], kappa[k], float(lengths[k]))
+        t_b, d1_b = R @ tangents[a], R @ directors[a]
+        gaps = (np.linalg.norm(positions[b] - positions[a] - chord) / lengths[k], np.linalg.norm(tangents[b] - t_b),
+                np.linalg.norm(directors[b] - d1_b))
+        if max(gaps) > GEOMETRY_RTOL + roundoff / lengths[k]:
+            what = ("positions", "tangents", "directors")[int(np.argmax(gaps))]
+            raise ValueError(
+                f"{what} of segment {k} (nodes {[int(a), int(b)]}) do not fit its stress-free shape: from node {int(a)}'s "
+                f"frame, length {lengths[k]:.6g} µm and natural curvature {np.round(kappa[k], 9).tolist()} 1/µm put node "
+                f"{int(b)} at {np.round(positions[a] + chord, 9).tolist()} with tangent {np.round(t_b, 9).tolist()} and "
+                f"director {np.round(d1_b, 9).tolist()} (relative tolerance {GEOMETRY_RTOL:g}); build curved networks "
+                "with socbjax.with_natural_curvature")

@@ -199,5 +199,6 @@ def _assemble(network, nodes, P_pos, P_tan, P_seg, P_len, P_strand, P_attach) ->
     couples[nodes] = np.asarray(network.couples)
     net = template.replace(loads=loads, EI=EI, couples=couples)
     return Network(positions=net.positions, tangents=net.tangents, lengths=net.lengths, EI=net.EI, loads=net.loads,
-                   couples=net.couples, natural_curvature=net.natural_curvature, GJ=net.GJ, topology=net.topology,
+                   couples=net.couples, natural_curvature=net.natural_curvature, GJ=net.GJ, directors=net.directors,
+                   topology=net.topology,
                    padding=Padding(projector=jnp.asarray(projector), active=jnp.asarray(active)))

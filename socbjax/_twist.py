@@ -2,9 +2,10 @@
 
 Every node i carries, besides its unit tangent t_i, a material-frame angle ψ_i (rad): the
 material director is d1 = cos ψ e + sin ψ (t × e), where e is the node's reference director
-g_i = ``orthonormal_complement(T_i)[0]`` (T_i the reference tangent) carried to the current
-tangent by the smallest rotation T_i → t_i (singular only for a tangent reversed by 180°
-from its reference).  In the reference state ψ = 0 and the material frame is (T, g, T × g).
+g_i (``Network.directors``, default ``orthonormal_complement(T_i)[0]``, T_i the reference
+tangent) carried to the current tangent by the smallest rotation T_i → t_i (singular only
+for a tangent reversed by 180° from its reference).  In the reference state ψ = 0 and the
+material frame is (T, g, T × g).
 
 Clamps fix the whole frame: t = T and ψ = 0.  A branch junction fixes the daughter's frame
 in the mother's material frame at the junction node: the daughter's base tangent and
@@ -18,7 +19,7 @@ from __future__ import annotations
 import jax
 import jax.numpy as jnp
 
-from ._geometry import minimal_rotation, orthonormal_complement
+from ._geometry import minimal_rotation
 from ._segment import frame_angle
 
 __all__ = ["carried_directors", "material_frames", "twist_targets"]
@@ -29,9 +30,9 @@ def _unit(v):
 
 
 def _reference_frames(network):
-    """[N, 3, 3] reference material frames, rows (T, g, T × g)."""
+    """[N, 3, 3] reference material frames, rows (T, g, T × g) (g: ``network.directors``)."""
     T = _unit(jnp.asarray(network.tangents))
-    g = jax.vmap(orthonormal_complement)(T)[:, 0]
+    g = jnp.asarray(network.directors)
     return jnp.stack([T, g, jnp.cross(T, g)], axis=1)
 
 

@@ -143,10 +143,8 @@ def test_with_natural_curvature_keeps_junction_angles_and_support_kinds():
 
 
 def test_bad_curvature_inputs_name_the_argument_and_the_fix():
-    with pytest.raises(NotImplementedError, match="twist"):
-        sj.arc(5, radius=1.0, angle=90.0)  # dim=3 by default: needs twist
-    with pytest.raises(NotImplementedError, match="GJ"):
-        sj.arc(5, radius=1.0, angle=90.0, dim=2, GJ=0.1)
+    with pytest.raises(ValueError, match="GJ"):  # a curved 3D rod needs its material frame
+        sj.with_natural_curvature(sj.cantilever(3), [0.0, 1.0, 0.0])
     with pytest.raises(ValueError, match="n_nodes > 2"):
         sj.arc(2, radius=1.0, angle=270.0, dim=2)
     with pytest.raises(ValueError, match="radius"):
@@ -158,9 +156,107 @@ def test_bad_curvature_inputs_name_the_argument_and_the_fix():
         sj.make_network(net.positions, net.tangents, net.segments, net.lengths, net.EI,
                         fixed_directions=[np.eye(2), np.zeros((0, 2)), np.zeros((0, 2))], clamped=[True, False, False],
                         natural_curvature=0.5)
-    with pytest.raises(ValueError, match="natural_curvature.*3D"):
+    with pytest.raises(ValueError, match="GJ"):
         sj.make_network(np.array([[0, 0, 0], [1.0, 0, 0]]), np.array([[1.0, 0, 0]] * 2), [(0, 1)], 1.0, 1.0,
                         fixed_directions=[np.eye(3), np.zeros((0, 3))], clamped=[True, False],
                         natural_curvature=[[0.0, 0.1, 0.0]])
     with pytest.raises(ValueError, match="crimp_angle"):
         sj.crimped_fibre(9, length=2.0, wavelength=1.0, crimp_angle=95.0)
+
+
+# ----------------------------------------------------------------------------- 3D: twisting networks
+
+
+def kirchhoff_tip(network, F, steps=6):
+    """Tip of a naturally curved 3D cantilever (uniform κ₁, κ₂, τ₀; clamped frame at node 0)
+    under a tip force F: shooting of the Kirchhoff rod with its material frame,
+    Ω = (m − (m·t)t)/EI + κ₁d1 + κ₂d2 + (m·t/GJ + τ₀) t, m' = −t × n, on the clamp moment."""
+    EI, GJ = float(network.EI[0]), float(network.GJ[0])
+    kappa, L = np.asarray(network.natural_curvature)[0], float(np.sum(network.lengths))
+    t0, d0 = np.asarray(network.tangents[0], float), np.asarray(network.directors[0], float)
+
+    def tip(m0, n):
+        def rhs(s, y):
+            D, m = y[3:12].reshape(3, 3), y[12:]
+            t, d1, d2 = D
+            M = m @ t
+            omega = (m - M * t) / EI + kappa[0] * d1 + kappa[1] * d2 + (M / GJ + kappa[2]) * t
+            return np.concatenate([t, np.cross(omega[None, :], D).ravel(), -np.cross(t, n)])
+        y0 = np.concatenate([np.zeros(3), t0, d0, np.cross(t0, d0), m0])
+        return solve_ivp(rhs, (0, L), y0, method="DOP853", rtol=1e-13, atol=1e-12).y[:, -1]
+
+    m0, scale = np.zeros(3), EI / L
+    for lam in np.linspace(0, 1, steps + 1)[1:]:
+        m0 = fsolve(lambda z, lam=lam: tip(z, lam * np.asarray(F))[12:] / scale, m0, xtol=1e-14)
+    end = tip(m0, np.asarray(F))
+    assert np.abs(end[12:]).max() < 1e-9 * scale
+    return end[:3]
+
+
+BATHE = dict(radius=100.0, angle=45.0, EI=1e7 / 12, GJ=5e6 * 0.1406)  # unit square section, E = 1e7, ν = 0
+
+
+def test_a_3d_arc_is_stress_free_and_bends_in_its_plane_as_the_planar_arc():
+    arc3 = sj.arc(7, radius=2.0, angle=120.0, EI=0.071, GJ=0.05)
+    assert arc3.twisting
+    np.testing.assert_allclose(np.linalg.norm(np.asarray(arc3.positions) - [0, 2.0, 0], axis=1), 2.0, rtol=1e-14)
+    np.testing.assert_allclose(np.asarray(arc3.positions)[:, 2], 0.0, atol=1e-15)
+    rest = sj.solve(arc3)
+    np.testing.assert_allclose(rest.positions, arc3.positions, atol=1e-12)
+    # (a load near 0.011 pN buckles this soft-twisting arc out of its plane: lateral-torsional buckling)
+    planar = sj.solve(sj.arc(7, radius=2.0, angle=120.0, EI=0.071, dim=2), {6: [0.0, -0.005]})
+    spatial = sj.solve(arc3, {6: [0.0, -0.005, 0.0]})
+    np.testing.assert_allclose(np.asarray(spatial.positions)[:, :2], planar.positions, atol=1e-11)
+    np.testing.assert_allclose(np.asarray(spatial.positions)[:, 2], 0.0, atol=1e-12)
+    np.testing.assert_allclose(spatial.state.twists, 0.0, atol=1e-12)
+
+
+def test_the_bathe_bolourchi_bend_matches_kirchhoff_shooting():
+    """45° bend of radius 100, tip force 600 out of its plane (inextensible, unshearable
+    version of Bathe & Bolourchi 1979; with extension and shear the literature tip is about
+    (47.2, 15.8, 53.4))."""
+    P = np.array([0.0, 0.0, 600.0])
+    tip = kirchhoff_tip(sj.arc(5, **BATHE), P)
+    sol = sj.solve(sj.arc(5, **BATHE), {4: P})
+    assert np.abs(np.asarray(sol.positions[-1]) - tip).max() < 1e-4  # measured 3.4e-5 on a length of 78.5
+    assert np.allclose(tip, [46.89, 15.56, 53.60], atol=0.01)
+    assert abs(tip[2]) > 50  # a large out-of-plane deflection: the first leg of the bend twists
+
+
+@pytest.mark.slow
+def test_the_bathe_bolourchi_bend_converges_at_sixth_order():
+    P = np.array([0.0, 0.0, 600.0])
+    tip = kirchhoff_tip(sj.arc(9, **BATHE), P, steps=12)
+    err = {n: np.abs(np.asarray(sj.solve(sj.arc(n, **BATHE), {n - 1: P}).positions[-1]) - tip).max() for n in (3, 5, 9)}
+    # measured: 2.3e-3, 3.4e-5, 5.1e-7 (order 6.1)
+    assert err[3] < 5e-3 and err[9] < 1e-6 and np.log2(err[5] / err[9]) > 5.5, err
+
+
+def test_a_helix_is_built_on_its_helix_and_rests_there():
+    h = sj.helix(13, radius=1.0, pitch=2.0, turns=1.0, EI=0.071, GJ=0.05)
+    c, speed = 2.0 / (2 * np.pi), np.hypot(1.0, 2.0 / (2 * np.pi))
+    phi = np.linspace(0, 2 * np.pi, 13)
+    exact = np.stack([np.cos(phi) - 1.0, np.sin(phi), c * phi], axis=1)  # started at the origin, axis at x = −1
+    np.testing.assert_allclose(h.positions, exact, atol=1e-12)
+    np.testing.assert_allclose(np.linalg.norm(np.asarray(h.natural_curvature)[:, :2], axis=1), 1.0 / speed**2,
+                               rtol=1e-12)  # κ = R/(R² + c²)
+    np.testing.assert_allclose(np.asarray(h.natural_curvature)[:, 2], c / speed**2, rtol=1e-12)  # τ = c/(R² + c²)
+    rest = {n: np.abs(np.asarray(sj.solve(sj.helix(n, radius=1.0, pitch=2.0, turns=1.0, GJ=0.05)).positions)
+                      - np.asarray(sj.helix(n, radius=1.0, pitch=2.0, turns=1.0, GJ=0.05).positions)).max()
+            for n in (7, 13)}
+    # the quintic represents a helix piece up to the discretisation error: 4.0e-7 µm with 13 nodes
+    assert rest[13] < 1e-6 and rest[13] < rest[7] / 30, rest
+
+
+def test_gradient_with_respect_to_3d_natural_curvature_matches_finite_differences():
+    net = sj.arc(5, radius=1.0, angle=90.0, EI=1.0, GJ=0.7)
+    F = jnp.array([0.2, -0.3, 0.4])
+
+    def tip_z(kappa):
+        return sj.solve(net.replace(natural_curvature=kappa), {4: F}).positions[-1, 2]
+
+    k0 = jnp.asarray(net.natural_curvature)
+    direction = jnp.asarray(np.random.default_rng(1).normal(size=k0.shape))
+    h = 1e-5
+    fd = (tip_z(k0 + h * direction) - tip_z(k0 - h * direction)) / (2 * h)
+    assert float(jnp.sum(jax.grad(tip_z)(k0) * direction)) == pytest.approx(float(fd), rel=1e-6)

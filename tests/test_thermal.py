@@ -50,6 +50,27 @@ def test_tangent_correlation_decays_as_exp_minus_s_over_2Lp():
     assert mean[-1] < 0.5  # the strand really decorrelates (expected 0.29)
 
 
+def test_in_3d_the_bending_angle_has_mean_square_2l_over_Lp_and_tangents_decorrelate_as_exp_minus_s_over_Lp():
+    EI, T = 0.01, 298.0
+    Lp = EI * 1e-18 / (KB_J_PER_K * T)  # 2.43 µm
+    chain = sj.cantilever(61, length=6.0, EI=EI, dim=3, GJ=0.01)
+    bends, cosines = [], []
+    for seed in range(200):
+        net = sj.thermal_network(chain, temperature=T, seed=seed)
+        t = np.asarray(net.tangents)
+        bends.append(np.arccos(np.clip(np.sum(t[1:] * t[:-1], axis=1), -1, 1)))  # bending angle per segment
+        cosines.append(t @ t[0])
+    bends, cosines = np.concatenate(bends), np.array(cosines)
+    l = 0.1
+    # ⟨θ²⟩ = 2l/Lp; the arc's exact angle is the norm of the two Gaussian bending angles
+    assert abs(np.mean(bends**2) / (2 * l / Lp) - 1) < 4 / np.sqrt(bends.size)  # θ²: exponential, rel. SE 1/√N
+    s = np.linspace(0.0, 6.0, 61)
+    mean, se = cosines.mean(axis=0), cosines.std(axis=0, ddof=1) / np.sqrt(len(cosines))
+    z = (mean - np.exp(-s / Lp))[1:] / se[1:]
+    assert np.all(np.abs(z) < 4.5), np.abs(z).max()
+    assert mean[-1] < 0.2  # decorrelated (expected 0.085)
+
+
 def test_thermal_shapes_are_seeded_stress_free_and_keep_the_network():
     mesh = sj.unit_dendritic_mesh(dim=2)
     a, b = sj.thermal_network(mesh, seed=3), sj.thermal_network(mesh, seed=3)
@@ -64,7 +85,7 @@ def test_thermal_shapes_are_seeded_stress_free_and_keep_the_network():
 def test_bad_thermal_inputs_are_refused_with_the_fix():
     with pytest.raises(ValueError, match="shorter than"):
         sj.thermal_network(sj.cantilever(3, length=2.0, EI=1e-4, dim=2))  # l = 40 Lp
-    with pytest.raises(NotImplementedError, match="twist"):
+    with pytest.raises(ValueError, match="GJ"):  # a curved 3D rod needs its material frame
         sj.thermal_network(sj.cantilever(3, dim=3))
     with pytest.raises(ValueError, match="temperature"):
         sj.thermal_network(sj.cantilever(3, dim=2), temperature=-1.0)
