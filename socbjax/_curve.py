@@ -21,8 +21,10 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array
 
+from ._checks import is_traced
 from ._quadrature import gauss_legendre, hermite_basis, hermite_basis_derivative
-from ._segment import planar_segment_curve, spatial_segment_curve
+from ._segment import kirchhoff_segment_curve, planar_segment_curve, spatial_segment_curve
+from ._twist import carried_directors
 
 __all__ = ["FilamentCurve", "filament_curve"]
 
@@ -61,7 +63,7 @@ def _segment_angles(tangents, segments):
     return a, a + jnp.arctan2(jnp.sin(b - a), jnp.cos(b - a))
 
 
-def _smooth(network, tangents, moments, forces, sigma):
+def _smooth(network, tangents, moments, forces, sigma, twists=None):
     """(tangents [S, K, d], d tangent/ds) of the SOCB interpolants at normalised points σ."""
     seg = network.segments
     basis = jnp.asarray(hermite_basis(tuple(sigma.tolist())))
@@ -75,20 +77,30 @@ def _smooth(network, tangents, moments, forces, sigma):
         t = jnp.stack([jnp.cos(theta), jnp.sin(theta)], axis=-1)
         dt = dtheta[..., None] * jnp.stack([-jnp.sin(theta), jnp.cos(theta)], axis=-1)
         return t, dt
+    if twists is not None:  # a twisting network: jets on the material frame (natural curvature)
+        e = carried_directors(tangents, network)
+        twist = (twists[a], twists[b], e[a], e[b], network.GJ, network.natural_curvature)
+        return jax.vmap(kirchhoff_segment_curve, in_axes=(0,) * 7 + (None, None, 0))(
+            tangents[a], moments[a], tangents[b], moments[b], forces, network.lengths, network.EI, basis, dbasis, twist)
     return jax.vmap(spatial_segment_curve, in_axes=(0,) * 7 + (None, None, None))(
         tangents[a], moments[a], tangents[b], moments[b], forces, network.lengths, network.EI, basis, dbasis,
         network.twisting)
 
 
 def filament_curve(network, positions, tangents, moments, forces, *, points_per_segment: int = 16,
-                   model: str = "socb", bar_directions=None) -> FilamentCurve:
+                   model: str = "socb", bar_directions=None, twists=None) -> FilamentCurve:
     """The curve of an equilibrium (``positions`` [N, d], unit ``tangents`` [N, d], node
     ``moments``, segment ``forces`` [S, d]) at ``points_per_segment`` equally spaced points
     per segment (≥ 2).  ``model="jointed"`` draws the rigid bars, whose directions
-    ``bar_directions`` [S, d] default to the chords."""
+    ``bar_directions`` [S, d] default to the chords.  ``twists`` [N]: the frame angles of a
+    twisting network (needed where it has natural curvature)."""
     P = int(points_per_segment)
     if P < 2:
         raise ValueError(f"points_per_segment must be at least 2 (the two end nodes), got {points_per_segment!r}")
+    curved = is_traced(network.natural_curvature) or np.any(np.asarray(network.natural_curvature) != 0)
+    if model != "jointed" and network.twisting and twists is None and curved:
+        raise ValueError("filament_curve: a naturally curved twisting network needs its frame angles (twists=...) to "
+                         "place its curvature between the nodes; use Solution.curve()")
     seg = network.segments
     a, b = seg[:, 0], seg[:, 1]
     sigma = np.linspace(0.0, 1.0, P)
@@ -102,11 +114,11 @@ def filament_curve(network, positions, tangents, moments, forces, *, points_per_
     else:
         gx, gw = gauss_legendre(8)
         sub = (sigma[:, None] * gx[None, :]).ravel()  # points of the sub-quadratures on [0, σ_p]
-        t_sub, _ = _smooth(network, tangents, moments, forces, sub)
+        t_sub, _ = _smooth(network, tangents, moments, forces, sub, twists)
         t_sub = t_sub.reshape(network.n_segments, P, gx.size, network.dim)
         offsets = jnp.einsum("spkd,k->spd", t_sub, jnp.asarray(gw)) * jnp.asarray(sigma)[None, :, None] * lengths[:, None, None]
         pts = positions[a][:, None, :] + offsets
-        t, dt = _smooth(network, tangents, moments, forces, sigma)
+        t, dt = _smooth(network, tangents, moments, forces, sigma, twists)
         curvature = _cross(t, dt)
     m_end = moments[b]
     arm = pts - positions[b][:, None, :]

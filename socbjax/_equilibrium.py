@@ -98,8 +98,9 @@ class Solution(eqx.Module):
         if self.model == "jointed":
             d = self.state.directions
             bars = jnp.stack([jnp.cos(d), jnp.sin(d)], -1) if self.network.dim == 2 else d / jnp.linalg.norm(d, axis=-1, keepdims=True)
+        twists = self.state.twists if self.model == "socb" and self.network.twisting else None
         return filament_curve(self.network, self.positions, self.tangents, self.moments, self.segment_forces,
-                              points_per_segment=points_per_segment, model=self.model, bar_directions=bars)
+                              points_per_segment=points_per_segment, model=self.model, bar_directions=bars, twists=twists)
 
     def end_rotation(self, node: int = -1) -> Array:
         """Rotation of the tangent at ``node`` from its reference direction (rad): signed

@@ -52,7 +52,7 @@ from jaxtyping import Array, Float
 from ._geometry import minimal_rotation, orthonormal_complement, sphere_exp, sphere_exp_differential_inverse, sphere_log_jet
 from ._quadrature import SegmentQuadrature
 
-__all__ = ["frame_angle", "planar_turn", "planar_segment_residual", "spatial_segment_residual", "spatial_segment_tangents", "planar_segment_angles",
+__all__ = ["frame_angle", "kirchhoff_segment_curve", "planar_turn", "planar_segment_residual", "spatial_segment_residual", "spatial_segment_tangents", "planar_segment_angles",
            "planar_segment_curve", "spatial_segment_curve"]
 
 
@@ -153,6 +153,17 @@ def spatial_segment_curve(t_a, m_a, t_b, m_b, n, length, EI, basis, dbasis, twis
     _, _, _, dw = _spatial_interpolant(t_a, m_a, t_b, m_b, n, length, EI, dbasis, twisting)
     t, dt = jax.vmap(lambda wk, dwk: jax.jvp(lambda z: sphere_exp(u, z), (wk,), (dwk,)))(w, dw)
     return t, dt / length
+
+
+def kirchhoff_segment_curve(t_a, m_a, t_b, m_b, n, length, EI, basis, dbasis, twist):
+    """(t [K, 3], dt/ds [K, 3]) of a twisting segment's interpolant (end jets with the
+    natural curvature on the material frame; ``twist`` as for
+    :func:`spatial_segment_residual`)."""
+    psi_a, psi_b, e_a, e_b, GJ, kappa0 = twist
+    u, _, _, data = _chart(_kirchhoff_jet(t_a, e_a, psi_a, m_a, n, EI, GJ, kappa0),
+                           _kirchhoff_jet(t_b, e_b, psi_b, m_b, n, EI, GJ, kappa0), length)
+    w, dw = basis @ data, dbasis @ data / length
+    return jax.vmap(lambda wk, dwk: jax.jvp(lambda z: sphere_exp(u, z), (wk,), (dwk,)))(w, dw)
 
 
 def frame_angle(t, e, d):

@@ -220,6 +220,8 @@ def test_the_bathe_bolourchi_bend_matches_kirchhoff_shooting():
     sol = sj.solve(sj.arc(5, **BATHE), {4: P})
     assert np.abs(np.asarray(sol.positions[-1]) - tip).max() < 1e-4  # measured 3.4e-5 on a length of 78.5
     assert np.allclose(tip, [46.89, 15.56, 53.60], atol=0.01)
+    curve = np.asarray(sol.curve(points_per_segment=5).positions)  # the smooth curve on the material-frame jets
+    np.testing.assert_allclose(curve[:, -1], np.asarray(sol.positions)[1:], atol=1e-9 * 78.5)
     assert abs(tip[2]) > 50  # a large out-of-plane deflection: the first leg of the bend twists
 
 
