@@ -15,12 +15,12 @@ from ._afm import ForceCurve, load_curve, save_curve  # noqa: E402
 from ._batch import BatchResult, curve_from_result, fit_batch  # noqa: E402
 from ._curve_inputs import check_dimension, collect_curve_files, read_curve  # noqa: E402
 from ._buckling import buckling_load  # noqa: E402
-from ._builders import SUPPORTS, cantilever, column  # noqa: E402
+from ._builders import SUPPORTS, arc, cantilever, column, crimped_fibre, helix  # noqa: E402
 from ._cache import enable_compilation_cache  # noqa: E402
 from ._compare import ModelComparison, compare_models  # noqa: E402
 from ._compress import compress  # noqa: E402
 from ._curve import FilamentCurve  # noqa: E402
-from ._curved import arc, crimped_fibre, helix, with_natural_curvature  # noqa: E402
+from ._curved import with_natural_curvature  # noqa: E402
 from ._dendritic import dendritic_outcrop, unit_dendritic_mesh  # noqa: E402
 from ._ensemble import EnsembleResult, compress_ensemble  # noqa: E402
 from ._equilibrium import Solution  # noqa: E402

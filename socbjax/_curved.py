@@ -1,5 +1,5 @@
-"""Naturally curved filaments: :func:`with_natural_curvature`, :func:`arc`, :func:`helix`,
-:func:`crimped_fibre`.
+"""Naturally curved filaments: :func:`with_natural_curvature` (the builders :func:`arc`,
+:func:`helix` and :func:`crimped_fibre` are in :mod:`socbjax._builders`).
 
 A segment with natural curvature κ₀ (1/µm) is a circular arc at rest: it turns by τ = κ₀l
 (rad) over its length l, its chord is l·sin(τ/2)/(τ/2) and its end tangents lie at ∓τ/2 from
@@ -23,12 +23,11 @@ from collections import deque
 
 import numpy as np
 
-from ._builders import cantilever, column
-from ._checks import check_array, check_dim, check_int, check_real, describe
+from ._checks import check_array, describe
 from ._network import Network, is_traced
 from ._network_checks import check_natural_curvature, check_reference_state, check_rest_frames, rest_segment
 
-__all__ = ["ACTIN_GJ", "arc", "check_curvable", "crimped_fibre", "helix", "with_natural_curvature"]
+__all__ = ["ACTIN_GJ", "check_curvable", "with_natural_curvature"]
 
 ACTIN_GJ = 8e-3  # pN·µm²: actin's torsional rigidity 8e-27 N·m² (Tsuda et al., PNAS 93, 12937, 1996)
 
@@ -165,83 +164,3 @@ def with_natural_curvature(network: Network, natural_curvature) -> Network:
     return Network(positions=positions, tangents=tangents, lengths=network.lengths, EI=network.EI, loads=network.loads,
                    couples=network.couples, natural_curvature=kappa, GJ=network.GJ, directors=directors,
                    topology=network.topology)
-
-
-def arc(n_nodes: int, *, radius: float, angle: float, EI=0.071, GJ=None, dim: int = 3) -> Network:
-    """A naturally curved filament, stress-free as built: a circular arc of ``radius`` (µm)
-    turning by ``angle`` (degrees, positive) that starts at the origin along +x and curves
-    toward +y in the x–y plane; node 0 clamped, the last node free; equal segments of natural
-    curvature 1/radius.  ``EI`` (pN·µm², default actin's 0.071) scalar or per segment.
-
-    ``dim=3`` (default) builds a Kirchhoff rod with twist, ``GJ`` (pN·µm²) defaulting to
-    actin's 8e-3 (Tsuda et al. 1996); its material frame at rest is the arc's (no natural
-    twist).  ``dim=2``: a planar arc (``GJ`` unused).  Each segment must turn by less than
-    180° (``ValueError`` otherwise: use more nodes)."""
-    dim = check_dim(dim)
-    n = check_int("n_nodes", n_nodes, minimum=2, maximum=None, hint=" (a filament needs at least 2 nodes, one segment)")
-    R = check_real("radius", radius, "µm", low=0.0)
-    phi = check_real("angle", angle, "degrees", low=0.0)
-    if phi / (n - 1) >= 180.0:
-        raise ValueError(f"angle = {angle!r}° over {n - 1} segments turns each by {phi / (n - 1):.4g}°; a segment turns "
-                         f"by less than 180°: use n_nodes > {int(phi // 180) + 1}")
-    if dim == 2:
-        return with_natural_curvature(cantilever(n, length=R * np.radians(phi), EI=EI, dim=2), 1.0 / R)
-    straight = cantilever(n, length=R * np.radians(phi), EI=EI, dim=3, GJ=ACTIN_GJ if GJ is None else GJ)
-    return with_natural_curvature(straight, _components(straight, 0, np.array([0.0, 0.0, 1.0 / R])))
-
-
-def _components(network: Network, node: int, darboux) -> np.ndarray:
-    """(κ₁, κ₂, τ₀): a world Darboux vector on the reference material frame of ``node``."""
-    t, d1 = np.asarray(network.tangents[node], float), np.asarray(network.directors[node], float)
-    return np.array([darboux @ d1, darboux @ np.cross(t, d1), darboux @ t])
-
-
-def helix(n_nodes: int, *, radius: float, pitch: float, turns: float, EI=0.071, GJ=None) -> Network:
-    """A naturally helical filament, stress-free as built (3D, a Kirchhoff rod with twist):
-    the helix of ``radius`` and ``pitch`` (µm per turn, positive: right-handed) about an axis
-    parallel to +z, ``turns`` turns long, starting at the origin; node 0 clamped, the last
-    node free, equal segments.  Its material frame at rest is the Frenet frame carried from
-    node 0, so each segment has the helix's curvature R/(R² + c²) and twist c/(R² + c²)
-    (c = pitch/2π).  ``GJ`` defaults to actin's 8e-3 pN·µm², ``EI`` to 0.071."""
-    n = check_int("n_nodes", n_nodes, minimum=2, maximum=None, hint=" (a filament needs at least 2 nodes, one segment)")
-    R = check_real("radius", radius, "µm", low=0.0)
-    c = check_real("pitch", pitch, "µm") / (2 * np.pi)
-    N = check_real("turns", turns, "turns", low=0.0)
-    speed = np.hypot(R, c)
-    length = 2 * np.pi * N * speed
-    t0 = np.array([0.0, R, c]) / speed
-    binormal = np.cross(t0, [-1.0, 0.0, 0.0])  # the principal normal points to the axis (−x from the start)
-    darboux = (c * t0 + R * binormal) / speed**2  # τ t + κ B
-    if R / speed**2 * length / (n - 1) >= np.pi:
-        raise ValueError(f"turns = {turns!r} over {n - 1} segments bends each by 180° or more: use more nodes")
-    straight = cantilever(n, length=length, EI=EI, dim=3, direction=t0, GJ=ACTIN_GJ if GJ is None else GJ)
-    return with_natural_curvature(straight, _components(straight, 0, darboux))
-
-
-def crimped_fibre(n_nodes: int, *, length: float, wavelength: float, crimp_angle: float, EI=0.071,
-                  supports=("clamped", "free"), dim: int = 2) -> Network:
-    """A crimped (wavy) fibre, stress-free as built: the sine-generated curve whose tangent
-    angle is θ(s) = crimp_angle · sin(2π s / wavelength) along the contour s ∈ [0, length]
-    (µm), starting at the origin with mean direction +x (the shape of crimped collagen and of
-    meanders).  Segment k is the arc that turns from θ(s_k) to θ(s_{k+1}), so the node
-    tangents are the curve's own; with a whole number of wavelengths and of segments per
-    half wavelength the last node lies on the x axis.
-
-    ``crimp_angle`` in degrees (0 < crimp_angle < 90), ``wavelength`` the contour length of
-    one period (µm); ``supports`` as for :func:`socbjax.column` (the supported directions
-    keep their orientation: a "pinned" last node slides along x).  Planar only: ``dim=3``
-    raises ``NotImplementedError`` (give a twisting 3D network its (κ₁, κ₂, τ₀) per segment
-    with :func:`socbjax.with_natural_curvature`)."""
-    if check_dim(dim) == 3:
-        raise NotImplementedError("crimped_fibre(dim=3): the 3D crimp is not built in; give a twisting 3D network its "
-                                  "(κ₁, κ₂, τ₀) per segment with socbjax.with_natural_curvature")
-    n = check_int("n_nodes", n_nodes, minimum=2, maximum=None, hint=" (a filament needs at least 2 nodes, one segment)")
-    L = check_real("length", length, "µm", low=0.0)
-    lam = check_real("wavelength", wavelength, "µm", low=0.0)
-    amp = check_real("crimp_angle", crimp_angle, "degrees", low=0.0)
-    if amp >= 90.0:
-        raise ValueError(f"crimp_angle must be below 90° (the fibre would fold back), got {crimp_angle!r}")
-    s = np.linspace(0.0, L, n)
-    theta = np.radians(amp) * np.sin(2 * np.pi * s / lam)
-    straight = column(n, length=L, EI=EI, supports=supports, dim=2)  # node 0 (the anchor) keeps θ(0) = 0
-    return with_natural_curvature(straight, np.diff(theta) / np.diff(s))

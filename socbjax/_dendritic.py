@@ -43,6 +43,7 @@ from ._checks import (
     check_real,
     check_size,
 )
+from ._curved import with_natural_curvature
 from ._network import Network, is_traced, make_network
 from ._perturbation import strand_perturbation
 
@@ -96,18 +97,20 @@ class _Grower:
             tip = new
         return tip
 
-    def build(self, EI, perturbation, seed, GJ=None) -> Network:
+    def build(self, EI, perturbation, seed, GJ=None, natural_curvature=None) -> Network:
         n, d = len(self.pos), self.dim
         fixed = [np.zeros((0, d)) for _ in range(n)]
         for i in [0, *self.pinned]:
             fixed[i] = np.eye(d)
         clamped = np.zeros(n, bool)
         clamped[0] = True
-        return _finish(make_network(
+        net = make_network(
             np.array(self.pos), np.array(self.tan), np.array(self.segs), np.array(self.lengths), EI,
             fixed_directions=fixed, clamped=clamped, attach=self.attach or None, probe=[0],
             probe_direction=np.eye(d)[-1], strand=np.array(self.strand), GJ=GJ,
-        ), perturbation, seed)
+        )
+        return _finish(net if natural_curvature is None else with_natural_curvature(net, natural_curvature),
+                       perturbation, seed)
 
 
 def _finish(net: Network, perturbation, seed) -> Network:
@@ -179,6 +182,7 @@ def unit_dendritic_mesh(
     perturbation: float = 0.0,
     daughter_segments: int | None = None,
     GJ: float | None = None,
+    natural_curvature=None,
 ) -> Network:
     """Paper Fig. 6a: a mother from the probe-bound nucleation point (node 0, clamped) along
     +z to the surface at z = ``mother_length``, hinged there, and a daughter from the
@@ -197,7 +201,8 @@ def unit_dendritic_mesh(
     values (``branch_angle`` then needs ``daughter_segments``: the count is topology).
     ``GJ`` (pN·µm², e.g. actin's 8e-3): in 3D a Kirchhoff rod with twist, the junction fixing
     the daughter's whole frame in the mother's (see :func:`socbjax.make_network`); None
-    (default): torsion-free.
+    (default): torsion-free.  ``natural_curvature``: the strands' rest shape, per segment or
+    one for all (:func:`socbjax.with_natural_curvature`; the mesh is built in that shape).
 
     Limits (checked before anything is built or traced; ``TypeError`` for a wrong type,
     ``ValueError`` for a wrong value, naming the argument): ``EI``, ``mother_length``,
@@ -238,6 +243,8 @@ def unit_dendritic_mesh(
     net = make_network(positions, tangents, segments, xp.concatenate([xp.full(m, ell), xp.asarray(pieces)]), EI,
                        fixed_directions=fixed, clamped=clamped, attach=[(m // 2, m + 1)], probe=[0],
                        probe_direction=axis, strand=np.repeat([0, 1], [m, k]), GJ=GJ)
+    if natural_curvature is not None:
+        net = with_natural_curvature(net, natural_curvature)
     return _finish(net, perturbation, 0)
 
 
@@ -300,6 +307,7 @@ def dendritic_outcrop(
     perturbation: float = 1e-4,
     max_redraws: int = 100,
     GJ: float | None = None,
+    natural_curvature=None,
 ) -> Network:
     """Paper Fig. 7a: a dendritic actin outcrop grown from one nucleation seed on the probe.
 
@@ -309,7 +317,8 @@ def dendritic_outcrop(
     ``seed`` of the azimuths (same seed, same network); ``dim`` 3 or 2; ``perturbation``
     lateral force per strand (default 1e-4 pN, well below thermal forces k_BT/ℓ ≈ 8e-3 pN);
     ``max_redraws`` per daughter; ``GJ`` torsional stiffness (pN·µm², None: torsion-free;
-    see :func:`unit_dendritic_mesh`).  See the module docstring for the growth rules.
+    see :func:`unit_dendritic_mesh`); ``natural_curvature`` the strands' rest shape (as for
+    :func:`unit_dendritic_mesh`).  See the module docstring for the growth rules.
     Strand ends on the surface are the pinned nodes other than the probe node 0.
 
     Limits (checked before growing; ``TypeError`` for a wrong type, ``ValueError`` for a
@@ -328,7 +337,7 @@ def dendritic_outcrop(
     phi = _angle(branch_angle, high=90.0, why=": the first daughter branches off the mother, which grows along +z, and "
                  "must head toward the surface")
     g = _grow_outcrop(generations, gap, growth, ell, phi, np.random.default_rng(seed), dim, max_redraws)
-    return g.build(EI, perturbation, seed, GJ)
+    return g.build(EI, perturbation, seed, GJ, natural_curvature)
 
 
 def _future_segments(growing, g, gap, growth, ell, remaining, first) -> int:

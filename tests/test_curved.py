@@ -262,3 +262,14 @@ def test_gradient_with_respect_to_3d_natural_curvature_matches_finite_difference
     h = 1e-5
     fd = (tip_z(k0 + h * direction) - tip_z(k0 - h * direction)) / (2 * h)
     assert float(jnp.sum(jax.grad(tip_z)(k0) * direction)) == pytest.approx(float(fd), rel=1e-6)
+
+
+def test_builders_take_natural_curvature_and_GJ():
+    bent = sj.cantilever(5, length=1.0, dim=2, natural_curvature=0.5)
+    np.testing.assert_allclose(bent.positions, sj.with_natural_curvature(sj.cantilever(5, dim=2), 0.5).positions)
+    mesh = sj.unit_dendritic_mesh(dim=3, GJ=8e-3, natural_curvature=[0.2, -0.1, 0.05])
+    assert mesh.twisting and np.allclose(mesh.natural_curvature, [0.2, -0.1, 0.05])
+    rest = sj.solve(mesh)  # stress-free as built: the rest shape within the discretisation error of helix pieces
+    assert np.abs(np.asarray(rest.positions) - np.asarray(mesh.positions)).max() < 1e-6
+    outcrop = sj.dendritic_outcrop(generations=2, dim=2, natural_curvature=0.05)
+    assert np.allclose(outcrop.natural_curvature, 0.05)
