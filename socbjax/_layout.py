@@ -19,13 +19,12 @@ import re
 from pathlib import Path
 
 import h5py
-import jax
 import jax.numpy as jnp
 import numpy as np
 
-from ._geometry import orthonormal_complement
 from ._hdf5 import InvalidFile, Reader, parse_json
 from ._network import DIFFERENTIABLE_FIELDS, Network, Topology
+from ._network_checks import default_directors
 from ._result import PHASES, CompressionResult, LimitPoint
 from ._solution import LEGACY_STATUS, result_from_name
 from ._version import __version__
@@ -175,8 +174,8 @@ def _read_network(reader: Reader, version: int) -> tuple[Network, _Sizes]:
     a.setdefault("natural_curvature", np.zeros((s,) if dim == 2 else (s, 3)))
     a.setdefault("GJ", np.zeros(s))
     if "directors" not in a:  # before format 3: the default reference directors
-        a["directors"] = (np.zeros((n, 2)) if dim == 2 else
-                          np.asarray(jax.vmap(orthonormal_complement)(jnp.asarray(a["tangents"], jnp.float64))[:, 0]))
+        tangents = a["tangents"] / np.linalg.norm(a["tangents"], axis=-1, keepdims=True)
+        a["directors"] = np.zeros((n, 2)) if dim == 2 else default_directors(tangents)
     values = {name: jnp.asarray(a.pop(name)) for name in DIFFERENTIABLE_FIELDS}
     return Network(**values, topology=Topology(dim=dim, **a)), sizes
 

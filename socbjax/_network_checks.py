@@ -42,6 +42,7 @@ __all__ = [
     "check_loops",
     "check_natural_curvature",
     "check_rest_frames",
+    "default_directors",
     "reference_directors",
     "rest_segment",
     "check_reference_state",
@@ -353,6 +354,14 @@ def check_supported(roots: np.ndarray, clamped, projector, dim) -> None:
             )
 
 
+def default_directors(tangents: np.ndarray) -> np.ndarray:
+    """[N, 3] the default reference directors of unit ``tangents`` (numpy, no JAX work):
+    ``orthonormal_complement(t)[0]``, the coordinate axis least aligned with t made ⊥ t."""
+    axis = np.eye(3)[np.argmin(np.abs(tangents), axis=1)]
+    f = axis - np.sum(axis * tangents, axis=1, keepdims=True) * tangents
+    return f / np.linalg.norm(f, axis=1, keepdims=True)
+
+
 def reference_directors(directors, tangents, tan_np, n: int, dim: int):
     """(directors [N, d], concrete copy or None): 3D reference material directors, unit and
     ⊥ the tangents (default ``orthonormal_complement(tangent)[0]``); 2D zeros."""
@@ -361,11 +370,14 @@ def reference_directors(directors, tangents, tan_np, n: int, dim: int):
             raise ValueError("directors: planar filaments have no material director (they do not twist); leave it None")
         return np.zeros((n, 2)), None
     if directors is None:
-        from ._geometry import orthonormal_complement  # noqa: PLC0415 (JAX only when needed)
-        import jax  # noqa: PLC0415
+        if tan_np is None:  # traced tangents: the same construction in JAX
+            import jax  # noqa: PLC0415
 
-        value = jax.vmap(orthonormal_complement)(jnp.asarray(tangents))[:, 0]
-        return (value, None) if tan_np is None else (np.asarray(value), np.asarray(value))
+            from ._geometry import orthonormal_complement  # noqa: PLC0415
+
+            return jax.vmap(orthonormal_complement)(jnp.asarray(tangents))[:, 0], None
+        value = default_directors(tan_np)
+        return value, value
     arr, arr_np = network_value("directors", directors, (n, 3), "unit vectors")
     if arr_np is None or tan_np is None:
         return arr, None

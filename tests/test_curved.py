@@ -273,3 +273,49 @@ def test_builders_take_natural_curvature_and_GJ():
     assert np.abs(np.asarray(rest.positions) - np.asarray(mesh.positions)).max() < 1e-6
     outcrop = sj.dendritic_outcrop(generations=2, dim=2, natural_curvature=0.05)
     assert np.allclose(outcrop.natural_curvature, 0.05)
+
+
+@pytest.mark.slow
+def test_the_kirchhoff_shooting_reference_agrees_with_collocation():
+    """The second method for the 3D references: scipy's collocation (solve_bvp) of the same
+    Kirchhoff rod, r(0) = 0 and D(0) clamped, m(L) = 0, on the Bathe–Bolourchi bend."""
+    from scipy.integrate import solve_bvp
+
+    net = sj.arc(5, **BATHE)
+    EI, GJ, kappa = BATHE["EI"], BATHE["GJ"], np.asarray(net.natural_curvature)[0]
+    L, P = float(np.sum(net.lengths)), np.array([0.0, 0.0, 600.0])
+    t0, d0 = np.asarray(net.tangents[0], float), np.asarray(net.directors[0], float)
+    D0 = np.array([t0, d0, np.cross(t0, d0)])
+    shooting = kirchhoff_tip(net, P, steps=12)
+
+    def rhs(s, y):
+        out = np.empty_like(y)
+        for j in range(y.shape[1]):
+            D, m = y[3:12, j].reshape(3, 3), y[12:, j]
+            t, d1, d2 = D
+            M = m @ t
+            omega = (m - M * t) / EI + kappa[0] * d1 + kappa[1] * d2 + (M / GJ + kappa[2]) * t
+            out[:, j] = np.concatenate([t, np.cross(omega[None, :], D).ravel(), -np.cross(t, P)])
+        return out
+
+    def bc(ya, yb):
+        return np.concatenate([ya[:3], ya[3:12] - D0.ravel(), yb[12:] / (EI / L)])
+
+    s = np.linspace(0, L, 41)  # initial guess: the unloaded arc
+    rest = sj.solve(sj.arc(41, **BATHE))
+    frames = np.asarray(rest.material_frames()).reshape(41, 9)
+    guess = np.concatenate([np.asarray(rest.positions), frames, np.zeros((41, 3))], axis=1).T
+    for lam in np.linspace(0.25, 1.0, 4):  # the same load ramp, so the same branch
+        solution = solve_bvp(_scaled(rhs, lam), bc, s, guess, tol=1e-10, max_nodes=20000)
+        assert solution.success, solution.message
+        s, guess = solution.x, solution.y
+    assert np.abs(guess[:3, -1] - shooting).max() < 1e-6
+
+
+def _scaled(rhs, lam):
+    """``rhs`` with the force part (the last three rows, m' = −t × P) scaled by ``lam``."""
+    def scaled(s, y):
+        out = rhs(s, y)
+        out[12:] *= lam
+        return out
+    return scaled
