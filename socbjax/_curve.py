@@ -77,14 +77,14 @@ def _smooth(network, tangents, moments, forces, sigma, twists=None):
         t = jnp.stack([jnp.cos(theta), jnp.sin(theta)], axis=-1)
         dt = dtheta[..., None] * jnp.stack([-jnp.sin(theta), jnp.cos(theta)], axis=-1)
         return t, dt
-    if twists is not None:  # a twisting network: jets on the material frame (natural curvature)
+    if network.twisting:  # jets on the material frame (its angles matter only with natural curvature)
+        twists = jnp.zeros(network.n_nodes) if twists is None else twists
         e = carried_directors(tangents, network)
         twist = (twists[a], twists[b], e[a], e[b], network.GJ, network.natural_curvature)
         return jax.vmap(kirchhoff_segment_curve, in_axes=(0,) * 7 + (None, None, 0))(
             tangents[a], moments[a], tangents[b], moments[b], forces, network.lengths, network.EI, basis, dbasis, twist)
-    return jax.vmap(spatial_segment_curve, in_axes=(0,) * 7 + (None, None, None))(
-        tangents[a], moments[a], tangents[b], moments[b], forces, network.lengths, network.EI, basis, dbasis,
-        network.twisting)
+    return jax.vmap(spatial_segment_curve, in_axes=(0,) * 7 + (None, None))(
+        tangents[a], moments[a], tangents[b], moments[b], forces, network.lengths, network.EI, basis, dbasis)
 
 
 def filament_curve(network, positions, tangents, moments, forces, *, points_per_segment: int = 16,

@@ -141,8 +141,8 @@ def check_natural_curvature(kappa, lengths, dim: int, twisting: bool = False):
             k = int(np.argmax(np.any(kappa != 0, axis=1)))
             raise ValueError(f"natural_curvature[{k}] = {kappa[k].tolist()} 1/µm: a naturally curved or twisted 3D "
                              "filament needs its torsional stiffness: pass GJ= (e.g. actin's 8e-3 pN·µm²)")
-        bent = np.linalg.norm(kappa[:, :2], axis=1) * (1.0 if lengths is None else lengths)
-        if lengths is not None and np.any(bent >= np.pi):
+        bent = None if lengths is None else np.linalg.norm(kappa[:, :2], axis=1) * lengths
+        if bent is not None and np.any(bent >= np.pi):
             k = int(np.argmax(bent >= np.pi))
             raise ValueError(f"natural_curvature[{k}] = {kappa[k].tolist()} 1/µm bends segment {k} by "
                              f"{np.degrees(bent[k]):.4g}° at rest; a segment turns by less than 180°: use more, shorter "

@@ -114,18 +114,16 @@ def planar_segment_residual(
     return jnp.concatenate([length_eq, moment_eq[None], bending_eq[None]])
 
 
-def _end_jet(t, m, n, EI, twisting=False):
+def _end_jet(t, m, n, EI):
     t = t / jnp.linalg.norm(t)
     dt = jnp.cross(m, t) / EI
     ddt = (jnp.dot(n, t) * t - n) / EI - jnp.dot(dt, dt) * t
-    if twisting:  # the twisting moment M = m·t turns t' about t: + M t × t' / EI
-        ddt = ddt + jnp.dot(m, t) * jnp.cross(t, dt) / EI
     return t, dt, ddt
 
 
-def _spatial_interpolant(t_a, m_a, t_b, m_b, n, length, EI, basis, twisting=False):
+def _spatial_interpolant(t_a, m_a, t_b, m_b, n, length, EI, basis):
     """Mean tangent u, chart data w_a, w_b and the chart coordinates w at the basis points."""
-    u, w_a, w_b, data = _chart(_end_jet(t_a, m_a, n, EI, twisting), _end_jet(t_b, m_b, n, EI, twisting), length)
+    u, w_a, w_b, data = _chart(_end_jet(t_a, m_a, n, EI), _end_jet(t_b, m_b, n, EI), length)
     return u, w_a, w_b, basis @ data
 
 
@@ -140,17 +138,17 @@ def _chart(jet_a, jet_b, length):
     return u, w_a, w_b, data
 
 
-def spatial_segment_tangents(t_a, m_a, t_b, m_b, n, length, EI, basis, twisting=False) -> Float[Array, "K 3"]:
+def spatial_segment_tangents(t_a, m_a, t_b, m_b, n, length, EI, basis) -> Float[Array, "K 3"]:
     """Unit tangents at the points tabulated by ``basis`` from the end data."""
-    u, _, _, w = _spatial_interpolant(t_a, m_a, t_b, m_b, n, length, EI, basis, twisting)
+    u, _, _, w = _spatial_interpolant(t_a, m_a, t_b, m_b, n, length, EI, basis)
     return jax.vmap(sphere_exp, in_axes=(None, 0))(u, w)
 
 
-def spatial_segment_curve(t_a, m_a, t_b, m_b, n, length, EI, basis, dbasis, twisting=False):
+def spatial_segment_curve(t_a, m_a, t_b, m_b, n, length, EI, basis, dbasis):
     """(t [K, 3], dt/ds [K, 3] in 1/µm): unit tangents of the interpolant and their arc-length
     derivative, t' = D exp_u(w) w', at the points of ``basis`` / ``dbasis``."""
-    u, _, _, w = _spatial_interpolant(t_a, m_a, t_b, m_b, n, length, EI, basis, twisting)
-    _, _, _, dw = _spatial_interpolant(t_a, m_a, t_b, m_b, n, length, EI, dbasis, twisting)
+    u, _, _, w = _spatial_interpolant(t_a, m_a, t_b, m_b, n, length, EI, basis)
+    _, _, _, dw = _spatial_interpolant(t_a, m_a, t_b, m_b, n, length, EI, dbasis)
     t, dt = jax.vmap(lambda wk, dwk: jax.jvp(lambda z: sphere_exp(u, z), (wk,), (dwk,)))(w, dw)
     return t, dt / length
 

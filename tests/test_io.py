@@ -22,11 +22,12 @@ import socbjax as sj
 from socbjax import CompressionResult, LimitPoint, atomic_path, check_output_path, output_lock
 
 
-def make_result(dim=3, K=7, N=4, E=1, seed=0):
-    """A hand-built result on a 4-node column (2D: crimped, with natural curvature): K steps,
+def make_result(dim=3, K=7, N=4, E=1, seed=0, twisting=True):
+    """A hand-built result on a 4-node column (2D: crimped; 3D: twisting and curved): K steps,
     N nodes, S = N − 1 segments."""
     rng = np.random.default_rng(seed)
-    net = sj.column(N, dim=dim) if dim == 3 else sj.crimped_fibre(N, length=1.0, wavelength=0.8, crimp_angle=20.0)
+    net = (sj.column(N, dim=dim, GJ=0.5, natural_curvature=[0.3, -0.2, 0.1]) if dim == 3 and twisting  # curved
+           else sj.column(N, dim=dim) if dim == 3 else sj.crimped_fibre(N, length=1.0, wavelength=0.8, crimp_angle=20.0))
     S = N - 1
     moments = rng.normal(size=(K, N, 3) if dim == 3 else (K, N))
     return CompressionResult(
@@ -58,7 +59,8 @@ def assert_results_equal(a, b):
         x, y = getattr(a, field.name), getattr(b, field.name)
         if field.name == "network":
             assert x.topology == y.topology and y.dim == x.dim and type(y.dim) is int
-            for name in ("positions", "tangents", "lengths", "EI", "loads", "couples", "natural_curvature"):
+            for name in ("positions", "tangents", "lengths", "EI", "loads", "couples", "natural_curvature", "GJ",
+                         "directors"):
                 u, v = np.asarray(getattr(x, name)), np.asarray(getattr(y, name))
                 assert u.dtype == v.dtype and u.shape == v.shape, name
                 np.testing.assert_array_equal(u, v)
@@ -262,27 +264,28 @@ def test_reads_files_of_the_first_0_1_0_layout(tmp_path):
 
 def test_reads_format_version_2_results_as_naturally_straight(tmp_path):
     """Format 2 had no natural curvature: its networks are straight."""
-    result = make_result(dim=3)
+    result = make_result(dim=3, twisting=False)
     path = sj.save(result, tmp_path / "run.h5")
     with h5py.File(path, "a") as f:
         f.attrs["format_version"] = 2
-        del f["network/natural_curvature"]
+        del f["network/natural_curvature"], f["network/GJ"], f["network/twisting"], f["network/directors"]
     assert_results_equal(result, sj.load(path))
     with h5py.File(path, "a") as f:
         f.attrs["format_version"] = 3
-    with pytest.raises(ValueError, match=r"lacks \['natural_curvature'\]"):
+    with pytest.raises(ValueError, match=r"lacks \['natural_curvature', 'GJ', 'directors', 'twisting'\]"):
         sj.load(path)
 
 
 def test_reads_format_version_1_results(tmp_path):
     """Format 1 (socbjax 0.1): an integer status, no nodal couples, no leaving_segment."""
-    result = make_result()
+    result = make_result(twisting=False)
     path = sj.save(result, tmp_path / "run.h5")
     with h5py.File(path, "a") as f:
         f.attrs["format_version"] = 1
         del f.attrs["result"]
         f.attrs["status"] = 6  # MAX_STEPS in socbjax 0.1
-        del f["network/couples"], f["network/leaving_segment"], f["network/natural_curvature"]
+        del f["network/couples"], f["network/leaving_segment"], f["network/natural_curvature"], f["network/GJ"]
+        del f["network/twisting"], f["network/directors"]
     assert_results_equal(result, sj.load(path))
 
 

@@ -130,10 +130,10 @@ def test_helix_and_l_shape_converge_at_high_order_with_3_5_9_nodes():
         assert err[3] < 3e-6 and err[9] < 1e-9 and np.log2(err[5] / err[9]) > 5.5, err
 
 
-@pytest.mark.parametrize("ratio", [1.0, 0.7])
+@pytest.mark.parametrize("ratio", [1.0, pytest.param(0.7, marks=pytest.mark.slow)])
 def test_an_l_shaped_filament_twists_its_first_leg_as_the_shooting_solution(ratio):
     EI, F = 1.0, np.array([0.0, 0.0, 1.0])  # out of the plane of the L: leg 1 twists
-    tip = shooting_l_shape(1.0, 1.0, EI, ratio * EI, F, steps=4)
+    tip = shooting_l_shape(1.0, 1.0, EI, ratio * EI, F, steps=2)
     net = l_shape(5, 1.0, 1.0, EI, ratio * EI)
     sol = sj.solve(net, {9: F})
     assert np.abs(np.asarray(sol.positions[-1]) - tip).max() < 5e-8  # measured 1.3e-8 (ratio 1), 1.0e-8 (0.7)
@@ -153,22 +153,26 @@ def test_planar_bending_does_not_twist():
     np.testing.assert_allclose(twisting.moments, free.moments, atol=1e-12)
 
 
-def test_gradient_with_respect_to_GJ_matches_finite_differences():
-    net = l_shape(5, 1.0, 1.0, 1.0, 0.8)
-    F = jnp.array([0.0, 0.0, 0.6])
+def test_gradients_with_respect_to_GJ_and_the_natural_curvature_match_finite_differences():
+    net = sj.arc(5, radius=1.0, angle=90.0, EI=1.0, GJ=0.7)  # curved and twisting: both drive the tip
+    F = jnp.array([0.2, -0.3, 0.4])
 
-    def tip_z(GJ):
-        return sj.solve(net.replace(GJ=GJ), {9: F}).positions[-1, 2]
+    def tip_z(GJ, kappa):
+        return sj.solve(net.replace(GJ=GJ, natural_curvature=kappa), {4: F}).positions[-1, 2]
 
-    GJ = jnp.asarray(net.GJ)
-    grad = jax.grad(tip_z)(GJ)
-    direction = jnp.asarray(np.random.default_rng(0).uniform(0.5, 1.5, GJ.size))
+    GJ, kappa = jnp.asarray(net.GJ), jnp.asarray(net.natural_curvature)
+    grad_GJ, grad_kappa = jax.grad(tip_z, argnums=(0, 1))(GJ, kappa)
+    rng = np.random.default_rng(0)
+    dGJ, dkappa = jnp.asarray(rng.uniform(0.5, 1.5, GJ.shape)), jnp.asarray(rng.normal(size=kappa.shape))
     h = 1e-5
-    fd = (tip_z(GJ + h * direction) - tip_z(GJ - h * direction)) / (2 * h)
-    assert float(grad @ direction) == pytest.approx(float(fd), rel=1e-6)
-    assert np.all(np.asarray(grad)[:4] < 0)  # a stiffer first leg twists less: the tip rises less
+    fd_GJ = (tip_z(GJ + h * dGJ, kappa) - tip_z(GJ - h * dGJ, kappa)) / (2 * h)
+    fd_kappa = (tip_z(GJ, kappa + h * dkappa) - tip_z(GJ, kappa - h * dkappa)) / (2 * h)
+    assert float(grad_GJ @ dGJ) == pytest.approx(float(fd_GJ), rel=1e-6)
+    assert float(jnp.sum(grad_kappa * dkappa)) == pytest.approx(float(fd_kappa), rel=1e-6)
+    assert abs(float(fd_GJ)) > 1e-3  # the twist really drives the tip
 
 
+@pytest.mark.slow
 def test_twisting_networks_square_compress_and_save(tmp_path):
     mesh = sj.unit_dendritic_mesh(dim=3, GJ=8e-3)
     assert mesh.twisting and not sj.unit_dendritic_mesh(dim=3).twisting
