@@ -186,7 +186,7 @@ def arc(n_nodes: int, *, radius: float, angle: float, EI=0.071, GJ=None, dim: in
         raise ValueError(f"angle = {angle!r}° over {n - 1} segments turns each by {phi / (n - 1):.4g}°; a segment turns "
                          f"by less than 180°: use n_nodes > {int(phi // 180) + 1}")
     if dim == 2:
-        return with_natural_curvature(cantilever(n, length=R * np.radians(phi), EI=EI, dim=2), 1.0 / R)
+        return cantilever(n, length=R * np.radians(phi), EI=EI, dim=2, natural_curvature=1.0 / R)
     straight = cantilever(n, length=R * np.radians(phi), EI=EI, dim=3, GJ=ACTIN_GJ if GJ is None else GJ)
     return with_natural_curvature(straight, _components(straight, 0, np.array([0.0, 0.0, 1.0 / R])))
 

@@ -55,14 +55,6 @@ def _cross(a, b):
     return jnp.cross(a, b)
 
 
-def _segment_angles(tangents, segments):
-    """2D end angles per segment with the end angle unwrapped against the start (a single
-    segment turns by less than π)."""
-    theta = jnp.arctan2(tangents[:, 1], tangents[:, 0])
-    a, b = theta[segments[:, 0]], theta[segments[:, 1]]
-    return a, a + jnp.arctan2(jnp.sin(b - a), jnp.cos(b - a))
-
-
 def _smooth(network, tangents, moments, forces, sigma, twists=None):
     """(tangents [S, K, d], d tangent/ds) of the SOCB interpolants at normalised points σ."""
     seg = network.segments
@@ -70,7 +62,8 @@ def _smooth(network, tangents, moments, forces, sigma, twists=None):
     dbasis = jnp.asarray(hermite_basis_derivative(tuple(sigma.tolist())))
     a, b = seg[:, 0], seg[:, 1]
     if network.dim == 2:
-        theta_a, theta_b = _segment_angles(tangents, seg)
+        theta = jnp.arctan2(tangents[:, 1], tangents[:, 0])  # the kernel unwraps each end against its start
+        theta_a, theta_b = theta[a], theta[b]
         theta, dtheta = jax.vmap(planar_segment_curve, in_axes=(0,) * 7 + (None, None, 0))(
             theta_a, moments[a], theta_b, moments[b], forces, network.lengths, network.EI, basis, dbasis,
             network.natural_curvature)

@@ -52,7 +52,7 @@ from jaxtyping import Array, Float
 from ._geometry import minimal_rotation, orthonormal_complement, sphere_exp, sphere_exp_differential_inverse, sphere_log_jet
 from ._quadrature import SegmentQuadrature
 
-__all__ = ["frame_angle", "kirchhoff_segment_curve", "planar_turn", "planar_segment_residual", "spatial_segment_residual", "spatial_segment_tangents", "planar_segment_angles",
+__all__ = ["frame_angle", "kirchhoff_segment_curve", "planar_turn", "turned_director", "planar_segment_residual", "spatial_segment_residual", "spatial_segment_tangents", "planar_segment_angles",
            "planar_segment_curve", "spatial_segment_curve"]
 
 
@@ -149,19 +149,31 @@ def spatial_segment_curve(t_a, m_a, t_b, m_b, n, length, EI, basis, dbasis):
     derivative, t' = D exp_u(w) w', at the points of ``basis`` / ``dbasis``."""
     u, _, _, w = _spatial_interpolant(t_a, m_a, t_b, m_b, n, length, EI, basis)
     _, _, _, dw = _spatial_interpolant(t_a, m_a, t_b, m_b, n, length, EI, dbasis)
-    t, dt = jax.vmap(lambda wk, dwk: jax.jvp(lambda z: sphere_exp(u, z), (wk,), (dwk,)))(w, dw)
-    return t, dt / length
+    return _chart_tangents(u, w, dw / length)
+
+
+def _chart_tangents(u, w, dw):
+    """(t [K, 3], t' [K, 3]) = (exp_u w, D exp_u(w) w') at chart points w with rates w'."""
+    return jax.vmap(lambda wk, dwk: jax.jvp(lambda z: sphere_exp(u, z), (wk,), (dwk,)))(w, dw)
+
+
+def _kirchhoff_interpolant(t_a, m_a, t_b, m_b, n, length, EI, basis, dbasis, twist):
+    """(u, w_a, w_b, w, t, t', unit t_a, unit t_b) of a twisting segment's chart quintic,
+    from end jets that carry the natural curvature on the material frame."""
+    psi_a, psi_b, e_a, e_b, GJ, kappa0 = twist
+    jet_a = _kirchhoff_jet(t_a, e_a, psi_a, m_a, n, EI, GJ, kappa0)
+    jet_b = _kirchhoff_jet(t_b, e_b, psi_b, m_b, n, EI, GJ, kappa0)
+    u, w_a, w_b, data = _chart(jet_a, jet_b, length)
+    w = basis @ data
+    t, dt = _chart_tangents(u, w, dbasis @ data / length)
+    return u, w_a, w_b, w, t, dt, jet_a[0], jet_b[0]
 
 
 def kirchhoff_segment_curve(t_a, m_a, t_b, m_b, n, length, EI, basis, dbasis, twist):
     """(t [K, 3], dt/ds [K, 3]) of a twisting segment's interpolant (end jets with the
     natural curvature on the material frame; ``twist`` as for
     :func:`spatial_segment_residual`)."""
-    psi_a, psi_b, e_a, e_b, GJ, kappa0 = twist
-    u, _, _, data = _chart(_kirchhoff_jet(t_a, e_a, psi_a, m_a, n, EI, GJ, kappa0),
-                           _kirchhoff_jet(t_b, e_b, psi_b, m_b, n, EI, GJ, kappa0), length)
-    w, dw = basis @ data, dbasis @ data / length
-    return jax.vmap(lambda wk, dwk: jax.jvp(lambda z: sphere_exp(u, z), (wk,), (dwk,)))(w, dw)
+    return _kirchhoff_interpolant(t_a, m_a, t_b, m_b, n, length, EI, basis, dbasis, twist)[4:6]
 
 
 def frame_angle(t, e, d):
@@ -169,12 +181,19 @@ def frame_angle(t, e, d):
     return jnp.arctan2(jnp.dot(jnp.cross(e, d), t), jnp.dot(e, d))
 
 
+def turned_director(t, e, angle):
+    """e (⊥ the unit t) turned about t by ``angle`` (rad): cos·e + sin·(t × e); batched on
+    the leading axes."""
+    angle = jnp.asarray(angle)[..., None]
+    return jnp.cos(angle) * e + jnp.sin(angle) * jnp.cross(t, e)
+
+
 def _kirchhoff_jet(t, e, psi, m, n, EI, GJ, kappa0):
     """End jet (t, t', t'') of a Kirchhoff rod and its material directors: t' = (m/EI + k) × t
     with the natural curvature vector k = κ₁ d1 + κ₂ d2, and t'' from m' = −t × n and
     k' = Ω × k (Ω = t × t' + τ t, τ = m·t/GJ + τ₀)."""
     t = t / jnp.linalg.norm(t)
-    d1 = jnp.cos(psi) * e + jnp.sin(psi) * jnp.cross(t, e)
+    d1 = turned_director(t, e, psi)
     k = kappa0[0] * d1 + kappa0[1] * jnp.cross(t, d1)
     curv = m / EI + k
     dt = jnp.cross(curv, t)
@@ -194,11 +213,8 @@ def _kirchhoff_rows(r_a, t_a, m_a, r_b, t_b, m_b, n, length, EI, frame, quad, tw
     (mod 2π); φ at the quadrature points places the natural curvature vector there, which
     enters Eq. 9 as EI t' = (m + EI k) × t."""
     psi_a, psi_b, e_a, e_b, GJ, kappa0 = twist
-    jet_a = _kirchhoff_jet(t_a, e_a, psi_a, m_a, n, EI, GJ, kappa0)
-    jet_b = _kirchhoff_jet(t_b, e_b, psi_b, m_b, n, EI, GJ, kappa0)
-    u, w_a, w_b, data = _chart(jet_a, jet_b, length)
-    w, dw = jnp.asarray(quad.basis) @ data, jnp.asarray(quad.dbasis) @ data / length
-    t, dt = jax.vmap(lambda wk, dwk: jax.jvp(lambda z: sphere_exp(u, z), (wk,), (dwk,)))(w, dw)
+    u, w_a, w_b, w, t, dt, ta, tb = _kirchhoff_interpolant(t_a, m_a, t_b, m_b, n, length, EI, jnp.asarray(quad.basis),
+                                                           jnp.asarray(quad.dbasis), twist)
     weights, chord = jnp.asarray(quad.weights), r_b - r_a
 
     def perp(v):
@@ -208,12 +224,12 @@ def _kirchhoff_rows(r_a, t_a, m_a, r_b, t_b, m_b, n, length, EI, frame, quad, tw
     m = m_a[None, :] - jnp.cross(offsets, n[None, :])
     f = orthonormal_complement(u)[0]  # any f ⊥ u: nothing depends on it
     E = minimal_rotation(u, t, f)  # [K, 3]
-    alpha_a = frame_angle(jet_a[0], minimal_rotation(u, jet_a[0], f), e_a)
-    alpha_b = frame_angle(jet_b[0], minimal_rotation(u, jet_b[0], f), e_b)
+    alpha_a = frame_angle(ta, minimal_rotation(u, ta, f), e_a)
+    alpha_b = frame_angle(tb, minimal_rotation(u, tb, f), e_b)
     omega = -jnp.einsum("i,ki->k", u, jnp.cross(t, dt)) / (1.0 + t @ u)
     tau = jnp.sum(m * t, axis=1) / GJ + kappa0[2]
     phi = psi_a + alpha_a + length * (jnp.asarray(quad.integration) @ (tau - omega))
-    d1 = jnp.cos(phi)[:, None] * E + jnp.sin(phi)[:, None] * jnp.cross(t, E)
+    d1 = turned_director(t, E, phi)
     k = kappa0[0] * d1 + kappa0[1] * jnp.cross(t, d1)
     rates = jax.vmap(sphere_exp_differential_inverse, in_axes=(None, 0, 0))(u, w, jnp.cross(m + EI * k, t))
     turn = psi_b + alpha_b - psi_a - alpha_a + length * (weights @ omega)
@@ -223,7 +239,7 @@ def _kirchhoff_rows(r_a, t_a, m_a, r_b, t_b, m_b, n, length, EI, frame, quad, tw
         perp(balance) * length / EI,
         perp(EI * (w_b - w_a) - length * (weights @ rates)) / EI,
         jnp.stack([jnp.dot(u, balance) * length / EI,
-                   jnp.arctan2(jnp.sin(turn), jnp.cos(turn)) - length * (weights @ tau)]),
+                   planar_turn(0.0, turn) - length * (weights @ tau)]),
     ])
 
 

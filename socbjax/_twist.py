@@ -11,7 +11,7 @@ Clamps fix the whole frame: t = T and ψ = 0.  A branch junction fixes the daugh
 in the mother's material frame at the junction node: the daughter's base tangent and
 reference director keep the coordinates they have in the mother's reference frame
 (replacing the torsion-free rule of parallel transport, ``docs/equations.md``).  The twist
-law along a segment is in :mod:`socbjax._segment` (``_twist_rows``).  Units: rad.
+law along a segment is in :mod:`socbjax._segment` (``_kirchhoff_rows``).  Units: rad.
 """
 
 from __future__ import annotations
@@ -20,7 +20,7 @@ import jax
 import jax.numpy as jnp
 
 from ._geometry import minimal_rotation
-from ._segment import frame_angle
+from ._segment import frame_angle, turned_director
 
 __all__ = ["carried_directors", "material_frames", "twist_targets"]
 
@@ -45,9 +45,7 @@ def carried_directors(tangents, network):
 def material_frames(tangents, twists, network):
     """[N, 3, 3] current material frames, rows (t, d1, d2), from unit ``tangents`` [N, 3]
     and frame angles ``twists`` [N] (rad)."""
-    e = carried_directors(tangents, network)
-    f = jnp.cross(tangents, e)
-    d1 = jnp.cos(twists)[:, None] * e + jnp.sin(twists)[:, None] * f
+    d1 = turned_director(tangents, carried_directors(tangents, network), twists)
     return jnp.stack([tangents, d1, jnp.cross(tangents, d1)], axis=1)
 
 
