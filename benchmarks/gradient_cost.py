@@ -74,8 +74,8 @@ def main(argv=None) -> int:
     unit = sj.UnitMeshModel(dim=2)
     cases = [("unit mesh 2D (EI, angle)", unit, ("EI", "branch_angle"), (0.071, 65.0), 0.5, 32, False)]
     if not args.quick:
-        small = sj.OutcropModel(generations=6, gap=6.0, dim=3, seed=0)
-        big = sj.OutcropModel(generations=7, gap=6.0, dim=3, seed=0)
+        small = sj.OutcropModel(generations=6, gap=6.0, dim=3, seed=0, GJ=None)  # as measured: torsion-free
+        big = sj.OutcropModel(generations=7, gap=6.0, dim=3, seed=0, GJ=None)
         cases += [
             ("outcrop 3D gen 6 (EI per order)", small, tuple(small.groups), np.full(len(small.groups), 0.071), 2.0, 32, True),
             ("outcrop 3D gen 7 (EI per order)", big, tuple(big.groups), np.full(len(big.groups), 0.071), 2.0, 32, False),

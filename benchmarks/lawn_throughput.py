@@ -57,7 +57,7 @@ def main(argv=None) -> int:
     if args.quick:
         builder, counts, samples, repeat = dict(generations=3, film_height=3.0, dim=2), (1, 2, 4), 6, 2
     else:
-        builder, counts, samples, repeat = dict(generations=6, film_height=3.0, dim=3), (1, 4, 16, 64), 12, 3
+        builder, counts, samples, repeat = dict(generations=6, film_height=3.0, dim=3, GJ=None), (1, 4, 16, 64), 12, 3
     if os.environ.get("LAWN_COUNTS"):
         counts = tuple(int(n) for n in os.environ["LAWN_COUNTS"].split(","))
     rows = []

@@ -33,7 +33,7 @@ import socbjax as sj
 
 
 def run(generations: int, displacement: float, max_step: float, repeat: bool = True) -> dict:
-    net = sj.dendritic_outcrop(generations=generations, gap=6.0, seed=0)
+    net = sj.dendritic_outcrop(generations=generations, gap=6.0, seed=0, GJ=None)  # the paper: torsion-free
     settings = sj.PathSettings(max_step=max_step, initial_step=min(0.02, max_step))
     t0 = time.perf_counter()
     # throw=False: the timed path runs past the first surface crossing (no contact model yet); its status is reported
@@ -70,7 +70,7 @@ def run(generations: int, displacement: float, max_step: float, repeat: bool = T
 def versus_dense(generations: int, displacement: float, max_step: float, max_attempts: int | None, gap: float = 6.0) -> dict:
     """The protocol with the sparse and with the dense Jacobian solver, each timed after a
     compiling warm-up (one attempt per phase); ``max_attempts`` caps every phase."""
-    net = sj.dendritic_outcrop(generations=generations, gap=gap, seed=0)
+    net = sj.dendritic_outcrop(generations=generations, gap=gap, seed=0, GJ=None)  # the paper: torsion-free
     base = sj.PathSettings(max_step=max_step, initial_step=min(0.02, max_step))
     capped = base.replace(max_attempts=max_attempts)  # None: compress's default budget
     out = {"generations": generations, "segments": net.n_segments, "max_attempts_per_phase": max_attempts}

@@ -31,7 +31,9 @@ SCRIPTS = [
     "fit_recovery",
     "lawn_throughput",
     "thermal_compression",
+    "thermal_compression_3d",
     "twist_unit_mesh",
+    "twist_outcrop",
     "peers/elastica_comparison",  # PyElastica columns only with the extra socbjax[peers]
 ]
 

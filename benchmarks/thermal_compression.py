@@ -66,27 +66,40 @@ def study(name: str, network, U: float, seeds, max_step: float) -> list[dict]:
     return rows
 
 
-def figure(studies: dict, out):
-    fig, axes = _common.new_figure((11.0, 4.6), ncols=len(studies))
+def figure(studies: dict, out, name: str = "thermal_compression", straight_label: str = "straight (paper)"):
+    fig, axes = _common.new_figure((5.5 * len(studies), 4.6), ncols=len(studies))
     axes = np.atleast_1d(axes)
-    for ax, (name, (rows, U)) in zip(axes, studies.items()):
+    for ax, (label, (rows, U)) in zip(axes, studies.items()):
         for k, r in enumerate(rows):
             straight = r["seed"] is None
             ax.plot(r["u"], r["F"], color="k" if straight else f"C{k % 10}", lw=2.0 if straight else 1.0,
-                    label="straight (paper)" if straight else f"thermal, seed {r['seed']}", zorder=3 if straight else 2)
+                    label=straight_label if straight else f"thermal, seed {r['seed']}", zorder=3 if straight else 2)
             if r["first_crossing_u_um"] is not None:
                 i = int(np.argmin(np.abs(r["u"] - r["first_crossing_u_um"])))
                 ax.plot(r["u"][i], r["F"][i], "x", color="k" if straight else f"C{k % 10}", ms=7, mew=1.5, zorder=4)
         ax.axvspan(0, 0.05 * U, color="0.9", zorder=0, label="first 5 % (pre-stress window)")
         ax.set_xlabel("probe displacement u (µm)")
         ax.set_ylabel("probe force F (pN)")
-        ax.set_title(f"{name}: straight vs frozen thermal shapes (298 K)")
+        ax.set_title(f"{label}: straight vs frozen thermal shapes (298 K)")
         ax.set_xlim(0, U)
         ax.set_ylim(bottom=0)
         ax.legend(fontsize=7, loc="upper center", bbox_to_anchor=(0.5, -0.14), ncol=3, frameon=False)
     fig.text(0.01, -0.11, "×: first surface crossing (no contact model; the path beyond it is not physical). "
              "Thermal: actin EI 0.071 pN·µm², Lp 17.3 µm.", fontsize=7)
-    return _common.save_figure(fig, out, "thermal_compression")
+    return _common.save_figure(fig, out, name)
+
+
+HEADERS = ["network", "shape", "steps", "F first step pN", "early peak pN", "secant pN/µm", "collapse µm", "max F pN",
+           "crossing µm", "s"]
+
+
+def table(studies: dict) -> list[list]:
+    return [[r["network"], "straight" if r["seed"] is None else f"seed {r['seed']}", r["steps"],
+             f"{r['first_step_force_pN']:.3f}", f"{r['early_peak_force_pN']:.3f}",
+             "-" if r["secant_stiffness_pN_per_um"] is None else f"{r['secant_stiffness_pN_per_um']:.3g}",
+             "-" if r["collapse_u_um"] is None else f"{r['collapse_u_um']:.3f}", f"{r['max_force_pN']:.3f}",
+             "-" if r["first_crossing_u_um"] is None else f"{r['first_crossing_u_um']:.3f}", f"{r['wall_s']:.1f}"]
+            for rows, _ in studies.values() for r in rows]
 
 
 def main(argv=None) -> int:
@@ -95,15 +108,7 @@ def main(argv=None) -> int:
     if not args.quick:
         plan["outcrop"] = (sj.dendritic_outcrop(dim=2), 3.0, range(4), 0.03)
     studies = {name: (study(name, net, U, seeds, step), U) for name, (net, U, seeds, step) in plan.items()}
-    headers = ["network", "shape", "steps", "F first step pN", "early peak pN", "secant pN/µm", "collapse µm",
-               "max F pN", "crossing µm", "s"]
-    table = [[r["network"], "straight" if r["seed"] is None else f"seed {r['seed']}", r["steps"],
-              f"{r['first_step_force_pN']:.3f}", f"{r['early_peak_force_pN']:.3f}",
-              "-" if r["secant_stiffness_pN_per_um"] is None else f"{r['secant_stiffness_pN_per_um']:.3g}",
-              "-" if r["collapse_u_um"] is None else f"{r['collapse_u_um']:.3f}", f"{r['max_force_pN']:.3f}",
-              "-" if r["first_crossing_u_um"] is None else f"{r['first_crossing_u_um']:.3f}", f"{r['wall_s']:.1f}"]
-             for rows, _ in studies.values() for r in rows]
-    _common.print_table(headers, table, title="thermal shapes under compression (2D)")
+    _common.print_table(HEADERS, table(studies), title="thermal shapes under compression (2D)")
     figure(studies, args.out)
     _common.write_json(args.out, "thermal_compression", args,
                        {name: {"displacement_um": U, "rows": rows} for name, (rows, U) in studies.items()})

@@ -30,7 +30,7 @@ __all__ = [
     # networks
     "Network", "Topology", "make_network", "cantilever", "column", "SUPPORTS", "unit_dendritic_mesh",
     "dendritic_outcrop", "pad_outcrop", "Padding", "universal_strands", "probe_network", "strand_perturbation",
-    "arc", "helix", "crimped_fibre", "with_natural_curvature", "thermal_network", "persistence_length",
+    "arc", "helix", "crimped_fibre", "with_natural_curvature", "thermal_network", "persistence_length", "ACTIN_GJ",
     # solving
     "solve", "Solution", "FilamentCurve", "buckling_load", "compress", "CompressionResult", "LimitPoint", "PHASES",
     "compress_ensemble", "EnsembleResult", "PathSettings", "NaturalParameter", "PseudoArclength", "Checkpoint",

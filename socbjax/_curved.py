@@ -38,8 +38,8 @@ def check_curvable(network: Network, what: str) -> None:
     if not isinstance(network, Network):
         raise TypeError(f"network must be a socbjax Network, got {describe(network)}")
     if network.padding is not None:
-        raise ValueError(f"{what}: the network is padded (pad_outcrop), and padding does not carry natural curvature; "
-                         "give the unpadded network its shape and compress it unpadded")
+        raise ValueError(f"{what}: the network is padded (pad_outcrop), and its inert pieces must stay straight; give "
+                         "the unpadded network its shape first, then pad it (pad_outcrop keeps the shape)")
     if any(is_traced(getattr(network, k)) for k in ("positions", "tangents", "lengths", "EI", "natural_curvature",
                                                      "directors")):
         raise TypeError(f"{what} places the nodes on the host and needs concrete positions, tangents, lengths, EI and "

@@ -1,6 +1,8 @@
 """Dendritic actin builders: :func:`unit_dendritic_mesh` (paper Fig. 6a) and
 :func:`dendritic_outcrop` (Fig. 7a).  Units µm, pN; EI in pN·µm² (actin ≈ 0.071,
-persistence length ≈ 17 µm).
+persistence length ≈ 17 µm).  In 3D the filaments are Kirchhoff rods with actin's torsional
+stiffness GJ = 8e-3 pN·µm² by default (``socbjax.ACTIN_GJ``); ``GJ=None`` builds the paper's
+torsion-free model.
 
 Geometry: the probe holds the nucleation point at the origin (node 0: clamped, position
 fixed, probe node); filaments grow along +z (+y in 2D), the last coordinate axis, toward the
@@ -43,7 +45,7 @@ from ._checks import (
     check_real,
     check_size,
 )
-from ._curved import with_natural_curvature
+from ._curved import ACTIN_GJ, with_natural_curvature
 from ._network import Network, is_traced, make_network
 from ._perturbation import strand_perturbation
 
@@ -181,7 +183,7 @@ def unit_dendritic_mesh(
     dim: int = 3,
     perturbation: float = 0.0,
     daughter_segments: int | None = None,
-    GJ: float | None = None,
+    GJ: float | None = ACTIN_GJ,
     natural_curvature=None,
 ) -> Network:
     """Paper Fig. 6a: a mother from the probe-bound nucleation point (node 0, clamped) along
@@ -199,9 +201,12 @@ def unit_dendritic_mesh(
     ``daughter_segments``: split the daughter into this many equal segments (default: pieces
     of ``segment_length``).  ``EI``, ``perturbation`` and ``branch_angle`` may be traced JAX
     values (``branch_angle`` then needs ``daughter_segments``: the count is topology).
-    ``GJ`` (pN·µm², e.g. actin's 8e-3): in 3D a Kirchhoff rod with twist, the junction fixing
-    the daughter's whole frame in the mother's (see :func:`socbjax.make_network`); None
-    (default): torsion-free.  ``natural_curvature``: the strands' rest shape, per segment or
+    ``GJ`` (pN·µm², default actin's ``socbjax.ACTIN_GJ`` = 8e-3, Tsuda et al. 1996): in 3D
+    a Kirchhoff rod with twist, the junction fixing the daughter's whole frame in the
+    mother's and in full moment balance (see :func:`socbjax.make_network`); ``GJ=None``: the
+    torsion-free model of the paper (no twist unknowns, the daughter's azimuth carried by
+    parallel transport; about half the run time, but the junction drops the moment about the
+    mother's axis).  Ignored in 2D (planar filaments do not twist).  ``natural_curvature``: the strands' rest shape, per segment or
     one for all (:func:`socbjax.with_natural_curvature`; the mesh is built in that shape).
 
     Limits (checked before anything is built or traced; ``TypeError`` for a wrong type,
@@ -306,7 +311,7 @@ def dendritic_outcrop(
     dim: int = 3,
     perturbation: float = 1e-4,
     max_redraws: int = 100,
-    GJ: float | None = None,
+    GJ: float | None = ACTIN_GJ,
     natural_curvature=None,
 ) -> Network:
     """Paper Fig. 7a: a dendritic actin outcrop grown from one nucleation seed on the probe.
@@ -316,8 +321,8 @@ def dendritic_outcrop(
     ``segment_length`` node spacing; ``branch_angle`` daughter–mother angle; ``EI``;
     ``seed`` of the azimuths (same seed, same network); ``dim`` 3 or 2; ``perturbation``
     lateral force per strand (default 1e-4 pN, well below thermal forces k_BT/ℓ ≈ 8e-3 pN);
-    ``max_redraws`` per daughter; ``GJ`` torsional stiffness (pN·µm², None: torsion-free;
-    see :func:`unit_dendritic_mesh`); ``natural_curvature`` the strands' rest shape (as for
+    ``max_redraws`` per daughter; ``GJ`` torsional stiffness (pN·µm², default actin's 8e-3;
+    None: the paper's torsion-free model; see :func:`unit_dendritic_mesh`); ``natural_curvature`` the strands' rest shape (as for
     :func:`unit_dendritic_mesh`).  See the module docstring for the growth rules.
     Strand ends on the surface are the pinned nodes other than the probe node 0.
 

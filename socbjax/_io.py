@@ -96,6 +96,7 @@ UNITS = {
     "tangents": "1",
     "moments": "pN·µm",
     "segment_forces": "pN",
+    "twists": "rad",
     "end_forces": "pN",
     "limit_points/displacement": "µm",
     "limit_points/force": "pN",

@@ -26,7 +26,7 @@ and for the experiment's own ρA outcrops under the probe
 (:meth:`LawnModel.realisation_covariance`).  Without a contact model, ``screen=u`` keeps
 only realisations that can be followed to the travel u without crossing a surface.
 
-Identifiability: at fixed geometry the force scales exactly with EI and with ρ, so one curve
+Identifiability: at fixed geometry the force scales exactly with EI (GJ scaled with it) and ρ, so one curve
 determines only ρ · EI; a fit refuses both free (fix one at an independently measured value).
 The branch angle changes the random growth discretely (which strands reach the surface), so
 it is a topology option here, not a fitted parameter.
@@ -45,6 +45,7 @@ import numpy as np
 
 from ._checks import check_int, check_real
 from ._compress import compress
+from ._curved import ACTIN_GJ
 from ._dendritic import dendritic_outcrop
 from ._fit_model import FitModel, contact_shift
 from ._padding import pad_outcrop
@@ -68,6 +69,9 @@ class LawnModel(FitModel):
     film_height : film thickness (µm): the outcrops' probe–substrate gap.
     generations, growth, segment_length, branch_angle, dim : of each outcrop
         (:func:`socbjax.dendritic_outcrop`; branch angle in degrees fixes the topology).
+    GJ : torsional stiffness (pN·µm²) at the built EI = 0.071: actin's 8e-3 by default
+        (3D Kirchhoff rods), None for the paper's torsion-free model.  A fitted EI scales GJ
+        with it (GJ/EI stays at its built ratio), so the force stays exactly ∝ EI.
     n_outcrops : realisations averaged (seeds ``seed`` … ``seed + n_outcrops − 1``).
     seeds : explicit outcrop seeds (a sequence of distinct integers ≥ 0) instead of
         ``seed`` and ``n_outcrops``.
@@ -94,7 +98,7 @@ class LawnModel(FitModel):
     def __init__(self, probe_radius: float | None = None, probe_area: float | None = None, *,
                  film_height: float = 3.0, generations: int = 4, n_outcrops: int = 8, seed: int = 0,
                  branch_angle: float = 70.0, growth: float = 1.0, segment_length: float = 0.5, dim: int = 3,
-                 seeds=None, screen: float | None = None):
+                 seeds=None, screen: float | None = None, GJ: float | None = ACTIN_GJ):
         if probe_radius is not None and probe_area is not None:
             raise ValueError("give probe_radius (sphere, µm) or probe_area (flat disc, µm²), not both")
         self.probe_radius = None if probe_radius is None else check_real("probe_radius", probe_radius, "µm", low=0.0, traced_ok=False)
@@ -107,7 +111,7 @@ class LawnModel(FitModel):
         def grow(k):
             return dendritic_outcrop(generations=generations, gap=self.film_height, growth=growth,
                                      segment_length=segment_length, branch_angle=branch_angle, EI=_ACTIN_EI, seed=k,
-                                     dim=dim)
+                                     dim=dim, GJ=GJ)
 
         self.seeds, self.screened_out, self.screen = _seeds(seeds, seed, n_outcrops), (), None
         built = {}
@@ -180,7 +184,8 @@ class LawnModel(FitModel):
             loads = stacked.loads * (values["perturbation"] / _BUILT_PERTURBATION)
         else:  # the builder's loads, scaled with EI so that forces scale exactly with EI
             loads = stacked.loads * (EI / _ACTIN_EI)
-        return stacked.replace(EI=EI_arr, loads=loads)
+        # GJ scales with EI (zeros when torsion-free): every stiffness, hence the force, ∝ EI
+        return stacked.replace(EI=EI_arr, loads=loads, GJ=stacked.GJ * (EI / _ACTIN_EI))
 
     def network(self, values: dict):
         """The first realisation at ``values`` (what a diagnosis of a failed path inspects)."""

@@ -4,7 +4,7 @@ After :class:`socbjax._hdf5.Reader` has checked the file's objects (links, stora
 types, sizes), :func:`open_file` checks the ``format`` and ``format_version`` attributes and
 :func:`read_result` / :func:`read_checkpoint` the layout: every dataset present with the dtype
 kind and a shape consistent with the others (K steps, N nodes, S segments, d = dim ∈ {2, 3},
-E strand ends, L limit points, R node equations), index ranges (segments, attach, transfer and
+E strand ends, L limit points, R node equations, w = N in a twisting network, else 0), index ranges (segments, attach, transfer and
 leaving segments, equation rows, end nodes, phases, limit-point steps), finite network values
 and the root attributes (known result name, parameters as a JSON object), so that a loaded
 result can be plotted and solved.  Problems raise :class:`socbjax._hdf5.InvalidFile`.
@@ -32,7 +32,9 @@ from ._version import __version__
 __all__ = ["CHECKPOINT_FORMAT", "FORMAT_VERSION", "MAX_MAGNITUDE", "PATH_FIELDS", "RESULT_FORMAT", "limit_point_kind",
            "open_file", "read_checkpoint", "read_result"]
 
-FORMAT_VERSION = 3  # 3: natural curvature, GJ and twisting; 2: result name (RESULTS), couples, topology; 1 and 2 still readable
+# 4: the path's frame angles (twists); 3: natural curvature, GJ and twisting; 2: result name
+# (RESULTS), couples, topology; 1 to 3 still readable
+FORMAT_VERSION = 4
 RESULT_FORMAT = "socbjax.compression"
 CHECKPOINT_FORMAT = "socbjax.checkpoint"
 # Limit-point kinds are open-ended (force_maximum, fold, surface_crossing, ...): any identifier
@@ -43,7 +45,7 @@ MAX_MAGNITUDE = 1e100  # of any stored value (µm, pN, ...): beyond it plots ove
 _PATH_LAYOUT = {
     "displacement": ("f", "K"), "force": ("f", "K"), "converged": ("b", "K"), "stable": ("b", "K"),
     "phase": ("iu", "K"), "positions": ("f", "KNd"), "tangents": ("f", "KNd"), "moments": ("f", "KNm"),
-    "segment_forces": ("f", "KSd"), "end_nodes": ("iu", "E"), "end_forces": ("f", "KE"), "iterations": ("iu", "K"),
+    "segment_forces": ("f", "KSd"), "twists": ("f", "Kw"), "end_nodes": ("iu", "E"), "end_forces": ("f", "KE"), "iterations": ("iu", "K"),
 }
 PATH_FIELDS = tuple(_PATH_LAYOUT)
 _NETWORK_LAYOUT = {
@@ -180,10 +182,12 @@ def _read_network(reader: Reader, version: int) -> tuple[Network, _Sizes]:
     return Network(**values, topology=Topology(dim=dim, **a)), sizes
 
 
-def _read_path(reader: Reader, sizes: _Sizes) -> dict[str, np.ndarray]:
+def _read_path(reader: Reader, sizes: _Sizes, version: int) -> dict[str, np.ndarray]:
     if "path" not in reader.datasets:
         raise InvalidFile("the group /path is missing")
-    arrays = _read_group(reader, sizes, "path", _PATH_LAYOUT)
+    arrays = _read_group(reader, sizes, "path", _PATH_LAYOUT, ("twists",) if version < 4 else ())
+    if "twists" not in arrays:  # before format 4: not recorded (CompressionResult.solution says so)
+        arrays["twists"] = np.zeros((arrays["displacement"].shape[0], 0))
     if arrays["displacement"].shape[0] == 0:
         raise InvalidFile("/path has no steps (K = 0); a result holds at least its start")
     _check_range("/path/phase", arrays["phase"], len(PHASES), f"phases {dict(enumerate(PHASES))}")
@@ -246,7 +250,8 @@ def _read_result_item(reader: Reader, version: int):
 def read_result(reader: Reader, version: int) -> CompressionResult:
     """The :class:`CompressionResult` of a checked result file (see the module docstring)."""
     network, sizes = _read_network(reader, version)
-    arrays = _read_path(reader, sizes)
+    sizes.known["w"] = (network.n_nodes if network.twisting else 0, "/network/twisting")
+    arrays = _read_path(reader, sizes, version)
     points = _read_limit_points(reader, sizes)
     item = _read_result_item(reader, version)
     text = reader.attr(reader.file, "parameters", "str", "the attribute parameters")

@@ -35,6 +35,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from ._builders import column
+from ._curved import ACTIN_GJ
 from ._dendritic import dendritic_outcrop, unit_dendritic_mesh
 from ._fit_model import FitModel, contact_shift, data_terms
 from ._lawn import LawnModel
@@ -88,17 +89,19 @@ class UnitMeshModel(FitModel):
     scale as EI/mother_length², displacements with mother_length).  ``segment_length`` (µm,
     default a quarter of the mother: 0.25 µm at the default 1 µm) is the node spacing.  The
     path can be followed to about 0.3–0.44 × mother_length of compression (70°: 0.43) before
-    a node crosses the surface (there is no contact model)."""
+    a node crosses the surface (there is no contact model).  ``GJ`` (pN·µm², default actin's
+    8e-3; None: torsion-free) as for :func:`socbjax.unit_dendritic_mesh`, held fixed in fits."""
 
     name = "unit-mesh"
     size_option, reach_fraction = "mother_length", 0.3  # crossing at 0.29 L (80°) .. 0.44 L (55°)
 
     def __init__(self, *, branch_angle: float = 70.0, mother_length: float = 1.0, segment_length: float | None = None,
-                 dim: int = 3):
+                 dim: int = 3, GJ: float | None = ACTIN_GJ):
         if segment_length is None:
             segment_length = 0.25 * mother_length
         self.base = unit_dendritic_mesh(
-            EI=_ACTIN_EI, branch_angle=branch_angle, mother_length=mother_length, segment_length=segment_length, dim=dim
+            EI=_ACTIN_EI, branch_angle=branch_angle, mother_length=mother_length, segment_length=segment_length, dim=dim,
+            GJ=GJ,
         )
         self.mother_length = float(mother_length)
         strand = np.asarray(self.base.strand)
@@ -160,8 +163,8 @@ def branch_orders(network: Network) -> np.ndarray:
 
 
 class OutcropModel(FitModel):
-    """A dendritic outcrop (:func:`socbjax.dendritic_outcrop`, arguments passed on) with EI
-    per branching order."""
+    """A dendritic outcrop (:func:`socbjax.dendritic_outcrop`, arguments passed on: ``GJ``
+    defaults to actin's and is held fixed in fits) with EI per branching order."""
 
     name = "outcrop"
 

@@ -28,6 +28,11 @@ pieces (e.g. growth 1 µm, segment 0.3 µm: P = 3, but up to 4 pieces reach the 
 which :func:`pad_outcrop` refuses with a ``ValueError`` (:class:`socbjax.LawnModel` then
 solves that realisation in its own topology).
 
+Curved (e.g. :func:`socbjax.thermal_network`) and twisting (``GJ=``) outcrops pad the same
+way: real segments keep their natural curvature, torsional stiffness and reference frames;
+an inert tail continues straight from its strand's last real node, in that node's tangent
+and frame, so it is stress-free as built.
+
 Units: µm, pN (the padded network keeps the realisation's values).
 """
 
@@ -38,6 +43,7 @@ import numpy as np
 
 from ._checks import check_int
 from ._network import Network, Padding, is_traced, make_network
+from ._network_checks import default_directors
 from ._probe import end_nodes
 
 __all__ = ["pad_outcrop", "universal_strands"]
@@ -116,88 +122,108 @@ def pad_outcrop(network: Network, generations: int, *, pieces: int = 2) -> tuple
     growth needs more than ``pieces`` segments)."""
     if not isinstance(network, Network):
         raise TypeError(f"network must be a socbjax Network (a dendritic_outcrop), got {type(network).__name__}")
-    if network.twisting:
-        raise ValueError("pad_outcrop: the outcrop is a twisting network (built with GJ=), which padding does not carry "
-                         "yet; compress it unpadded (socbjax.compress)")
-    if is_traced(network.natural_curvature) or np.any(np.asarray(network.natural_curvature) != 0):
-        raise ValueError("pad_outcrop: the outcrop has natural curvature (e.g. thermal_network), which padding does not "
-                         "carry yet; compress curved outcrops unpadded (socbjax.compress)")
     generations = check_int("generations", generations, minimum=1, maximum=12)
     pieces = check_int("pieces", pieces, minimum=1, maximum=16)
     strands = universal_strands(generations)
     uid, chains = _real_to_universal(network, generations, pieces, strands)
-    pos, tan, lengths = (np.asarray(a, float) for a in (network.positions, network.tangents, network.lengths))
+    if is_traced(network.positions) or is_traced(network.natural_curvature) or is_traced(network.directors):
+        raise TypeError("pad_outcrop needs a concrete network (its shape decides the padding); call it outside "
+                        "jax transformations")
+    pos, tan, lengths, dirs = (np.asarray(a, float) for a in (network.positions, network.tangents, network.lengths,
+                                                               network.directors))
     ell = float(np.median(lengths))
-    real_seg_length = {int(b): float(L) for (a, b), L in zip(np.asarray(network.segments), lengths)}
+    real_segment = {int(b): s for s, (a, b) in enumerate(np.asarray(network.segments))}  # by its end node
     real_of = {u: k for k, u in enumerate(uid)}
-    P_pos, P_tan, P_seg, P_len, P_strand, P_attach = [pos[0]], [tan[0]], [], [], [], []
+    P = _Pieces(pos[0], tan[0], dirs[0])
     nodes = np.full(network.n_nodes, -1)
     nodes[0] = 0
     chain_nodes = []  # universal strand -> its padded nodes (base first)
     for u, (parent, born) in enumerate(strands):
         k = real_of.get(u)
-        if u == 0:
-            base = 0
-            t = tan[0]
-        else:
-            mother_chain = chain_nodes[parent]
-            at = mother_chain[(born - strands[parent][1]) * pieces]
+        base = 0
+        if u:
+            at = chain_nodes[parent][(born - strands[parent][1]) * pieces]
             if k is not None:
-                t = tan[chains[k][0]]
+                t, director = tan[chains[k][0]], dirs[chains[k][0]]
+                nodes[chains[k][0]] = len(P.pos)
             else:
-                tm = P_tan[at]
+                tm = P.tan[at]
                 t = np.cos(_INERT_ANGLE) * tm + np.sin(_INERT_ANGLE) * _lateral(tm)
-            base = len(P_pos)
-            P_pos.append(P_pos[at])
-            P_tan.append(t)
-            P_attach.append((at, base))
-            if k is not None:
-                nodes[chains[k][0]] = base
+                director = default_directors(t[None])[0] if t.shape[0] == 3 else dirs[0]
+            base = P.node(P.pos[at], t, director)
+            P.attach.append((at, base))
         chain = [base]
         real = chains[k][1] if k is not None else np.zeros(0, int)
         for j in range((generations - born + 1) * pieces):
-            i = len(P_pos)
             if j < len(real):
-                P_pos.append(pos[real[j]])
-                P_tan.append(tan[real[j]])
-                P_len.append(real_seg_length[int(real[j])])
-                nodes[real[j]] = i
-            else:
-                P_pos.append(P_pos[chain[-1]] + ell * t)
-                P_tan.append(t)
-                P_len.append(ell)
-            P_seg.append((chain[-1], i))
-            P_strand.append(u)
+                s = real_segment[int(real[j])]
+                nodes[real[j]] = i = P.node(pos[real[j]], tan[real[j]], dirs[real[j]])
+                P.segment(chain[-1], i, lengths[s], u, s)
+            else:  # inert: straight on from the chain's last node, in its frame (stress-free)
+                end = chain[-1]
+                i = P.node(P.pos[end] + ell * P.tan[end], P.tan[end], P.dir[end])
+                P.segment(end, i, ell, u, -1)
             chain.append(i)
         chain_nodes.append(chain)
     if np.any(nodes < 0):
         raise ValueError("the outcrop has nodes outside its strands' chains; it is not a dendritic_outcrop")
-    return _assemble(network, nodes, P_pos, P_tan, P_seg, P_len, P_strand, P_attach), nodes
+    return _assemble(network, nodes, P), nodes
 
 
-def _assemble(network, nodes, P_pos, P_tan, P_seg, P_len, P_strand, P_attach) -> Network:
-    d, n = network.dim, len(P_pos)
+class _Pieces:
+    """The padded network's nodes (position, tangent, reference director) and segments (ends,
+    length, universal strand, real segment index or −1 for inert ones), in creation order."""
+
+    def __init__(self, position, tangent, director):
+        self.pos, self.tan, self.dir = [position], [tangent], [director]
+        self.seg, self.len, self.strand, self.source, self.attach = [], [], [], [], []
+
+    def node(self, position, tangent, director) -> int:
+        self.pos.append(position)
+        self.tan.append(tangent)
+        self.dir.append(director)
+        return len(self.pos) - 1
+
+    def segment(self, a, b, length, strand, source) -> None:
+        self.seg.append((a, b))
+        self.len.append(length)
+        self.strand.append(strand)
+        self.source.append(source)
+
+
+def _assemble(network, nodes, P: _Pieces) -> Network:
+    """The padded network: the real values on real nodes and segments (EI, GJ, natural
+    curvature, loads, couples), inert ones elsewhere (mean EI and GJ, naturally straight)."""
+    d, n = network.dim, len(P.pos)
     fixed = [np.zeros((0, d)) for _ in range(n)]
     fixed[0] = np.eye(d)
     clamped = np.zeros(n, bool)
     clamped[0] = True
-    template = make_network(np.array(P_pos), np.array(P_tan), np.array(P_seg), np.array(P_len),
-                            float(np.mean(np.asarray(network.EI))), fixed_directions=fixed, clamped=clamped,
-                            attach=P_attach, probe=[0], probe_direction=np.asarray(network.probe_direction),
-                            strand=np.array(P_strand))
-    projector = np.array(template.position_projector)
+    source = np.array(P.source)
+    real = source >= 0
+
+    def per_segment(values, inert):
+        out = np.full((len(source),) + np.shape(values)[1:], inert, float)
+        out[real] = np.asarray(values)[source[real]]
+        return out
+
+    EI = per_segment(network.EI, float(np.mean(np.asarray(network.EI))))
+    GJ = per_segment(network.GJ, float(np.mean(np.asarray(network.GJ)))) if network.twisting else None
+    net = make_network(np.array(P.pos), np.array(P.tan), np.array(P.seg), np.array(P.len), EI,
+                       fixed_directions=fixed, clamped=clamped, attach=P.attach, probe=[0],
+                       probe_direction=np.asarray(network.probe_direction), strand=np.array(P.strand),
+                       natural_curvature=per_segment(network.natural_curvature, 0.0), GJ=GJ,
+                       directors=np.array(P.dir) if network.twisting else None)
+    projector = np.array(net.position_projector)
     for i in end_nodes(network):
         projector[nodes[i]] = np.eye(d)
     active = np.zeros(n)
     active[nodes] = 1.0
     loads = np.zeros((n, d))
     loads[nodes] = np.asarray(network.loads)
-    EI = np.full(len(P_len), float(np.mean(np.asarray(network.EI))))
-    padded_segment_of = {int(b): s for s, (_, b) in enumerate(P_seg)}
-    EI[[padded_segment_of[int(b)] for b in nodes[np.asarray(network.segments)[:, 1]]]] = np.asarray(network.EI)
     couples = np.zeros((n,) if d == 2 else (n, 3))
     couples[nodes] = np.asarray(network.couples)
-    net = template.replace(loads=loads, EI=EI, couples=couples)
+    net = net.replace(loads=loads, couples=couples)
     return Network(positions=net.positions, tangents=net.tangents, lengths=net.lengths, EI=net.EI, loads=net.loads,
                    couples=net.couples, natural_curvature=net.natural_curvature, GJ=net.GJ, directors=net.directors,
                    topology=net.topology,

@@ -55,13 +55,15 @@ def plot_shapes(ax, items, *, plane=(0, 1), points_per_segment: int = 24):
 
 
 @eqx.filter_jit
-def _curve_positions(network, positions, tangents, moments, forces, points: int):
-    """[K, S, P, d] curve points of K equilibria of one network (``points`` is static)."""
+def _curve_positions(network, positions, tangents, moments, forces, twists, points: int):
+    """[K, S, P, d] curve points of K equilibria of one network (``points`` is static);
+    ``twists`` [K, N] the frame angles of a twisting network ([K, 0] otherwise)."""
 
-    def one(p, t, m, f):
-        return filament_curve(network, p, t, m, f, points_per_segment=points).positions
+    def one(p, t, m, f, psi):
+        psi = psi if network.twisting else None
+        return filament_curve(network, p, t, m, f, points_per_segment=points, twists=psi).positions
 
-    return jax.vmap(one)(positions, tangents, moments, forces)
+    return jax.vmap(one)(positions, tangents, moments, forces, twists)
 
 
 def step_curves(result, steps, points_per_segment: int = 12) -> np.ndarray:
@@ -72,8 +74,14 @@ def step_curves(result, steps, points_per_segment: int = 12) -> np.ndarray:
     batch = 8 * -(-len(steps) // 8)
     rows = np.concatenate([steps, np.full(batch - len(steps), steps[-1])])
     take = lambda a: jnp.asarray(np.asarray(a, dtype=float)[rows])
+    twists = take(result.twists)
+    if result.network.twisting and twists.shape[-1] != result.network.n_nodes:  # a format-3 file: ψ not recorded
+        if np.any(np.asarray(result.network.natural_curvature) != 0):
+            raise ValueError("this result of a curved twisting network has no material-frame angles (read from a "
+                             "file of format 3 or older), which its smooth curves need; re-run the compression")
+        twists = jnp.zeros(twists.shape[:1] + (result.network.n_nodes,))  # straight rods: ψ does not enter the curve
     pts = _curve_positions(result.network, take(result.positions), take(result.tangents), take(result.moments),
-                           take(result.segment_forces), int(points_per_segment))
+                           take(result.segment_forces), twists, int(points_per_segment))
     return np.asarray(pts)[: len(steps)]
 
 

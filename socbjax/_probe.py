@@ -212,14 +212,17 @@ def check_compress_options(*, unload=False, method=None, perturbation=None, para
 @eqx.filter_jit
 def observe(model, X, loads):
     """Per row of flat states X [K, n]: positions, tangents, moments, segment forces, probe
-    force (compressive positive) and the axial force at every node."""
+    force (compressive positive), the axial force at every node and the material-frame angles
+    ψ [N] (rad) of a twisting network ([0] otherwise)."""
     net = model.network
     _, unravel = ravel_pytree(model.initial_state())
 
     def one(x):
         st = unravel(x)
         axial = routed_nodal_force(st.forces, net, loads) @ jnp.asarray(net.probe_direction)
-        return st.positions, state_tangents(st.directors, net.dim), st.moments, st.forces, jnp.sum(jnp.where(net.probe, axial, 0.0)), -axial
+        twists = getattr(st, "twists", jnp.zeros(0))  # the jointed baseline has no frame angles
+        return (st.positions, state_tangents(st.directors, net.dim), st.moments, st.forces,
+                jnp.sum(jnp.where(net.probe, axial, 0.0)), -axial, twists)
 
     return jax.vmap(one)(X)
 
@@ -269,7 +272,7 @@ def observe_rows(model, X: np.ndarray, capacity: int):
 def package_path(model, rec, extra, result, settings, u_max, unload, parameters) -> CompressionResult:
     net = model.network
     capacity = settings.max_steps * (3 if unload else 2) + 1  # settle point + every phase's buffer
-    positions, tangents, moments, forces, probe_force, axial = observe_rows(model, rec["X"], capacity)
+    positions, tangents, moments, forces, probe_force, axial, twists = observe_rows(model, rec["X"], capacity)
     ends = end_nodes(net)
     sign_ref = extra.get("sign_ref", rec["SIGN"][0])
     params = {"displacement_um": u_max, "unload": bool(unload), "method": settings.method, "sampled": False,
@@ -289,7 +292,7 @@ def package_path(model, rec, extra, result, settings, u_max, unload, parameters)
     return CompressionResult(
         displacement=np.asarray(rec["U"]), force=probe_force, converged=np.ones(len(rec["U"]), bool),
         stable=rec["SIGN"] == sign_ref, phase=rec["PHASE"].astype(np.int8), positions=positions, tangents=tangents,
-        moments=moments, segment_forces=forces, end_nodes=ends, end_forces=axial[:, ends],
+        moments=moments, segment_forces=forces, twists=twists, end_nodes=ends, end_forces=axial[:, ends],
         iterations=rec["ITER"].astype(np.int32), result=result, network=net,
         limit_points=events, parameters_json=parameters_json(params),
     )

@@ -63,6 +63,8 @@ class CompressionResult(eqx.Module):
     positions, tangents : [K, N, d] node positions (µm) and unit tangents.
     moments : [K, N] (2D, pN·µm) or [K, N, 3] (3D) nodal bending moments.
     segment_forces : [K, S, d] internal force per segment (pN).
+    twists : [K, N] material-frame angles ψ (rad) of a twisting network (built with ``GJ=``),
+        [K, 0] otherwise; with the tangents they give the material frames of every step.
     end_nodes : [E] supported non-probe nodes (strand ends on the surface).
     end_forces : [K, E] axial force on each strand end (pN, compressive positive).
     iterations : [K] Newton iterations of each step.
@@ -82,6 +84,7 @@ class CompressionResult(eqx.Module):
     tangents: Array
     moments: Array
     segment_forces: Array
+    twists: Array
     end_nodes: Array
     end_forces: Array
     iterations: Array
@@ -129,10 +132,11 @@ class CompressionResult(eqx.Module):
     def solution(self, i: int) -> Solution:
         """Row ``i`` as a :class:`socbjax.Solution` (curve, end rotations, deflection, reactions)."""
         net = self.network
-        if net.twisting:
-            raise NotImplementedError("CompressionResult.solution: the path of a twisting network (built with GJ=) "
-                                      "does not record the material-frame angles yet; solve the state you need with "
-                                      "socbjax.solve, or use the recorded positions, tangents, moments and forces")
+        twisting = net.twisting
+        if twisting and self.twists.shape[-1] != net.n_nodes:
+            raise ValueError("CompressionResult.solution: this result of a twisting network has no material-frame "
+                             "angles (read from a file of format 3 or older, which did not record them); solve the "
+                             "state you need with socbjax.solve, or use the recorded positions, tangents and moments")
         i = int(i) if not isinstance(i, (jnp.ndarray, np.ndarray)) else i
         positions, tangents, moments, forces = (self.positions[i], self.tangents[i], self.moments[i], self.segment_forces[i])
         EI = node_stiffness(net)
@@ -141,10 +145,12 @@ class CompressionResult(eqx.Module):
             directors, curvatures = angles, moments / EI
         else:
             angles = jnp.stack([jnp.arctan2(tangents[:, 1], tangents[:, 0]), jnp.arcsin(jnp.clip(tangents[:, 2], -1, 1))], -1)
-            directors, curvatures = tangents, moments / EI[:, None]
+            bending = moments - jnp.sum(moments * tangents, axis=1, keepdims=True) * tangents  # the twisting part out
+            directors, curvatures = tangents, bending / EI[:, None]
         reactions = jnp.einsum("nij,nj->ni", jnp.asarray(net.position_projector), net_nodal_force(forces, net, net.loads))
         row = RESULTS.where(jnp.asarray(self.converged)[i], RESULTS.successful, RESULTS.not_reached)
-        state = SOCBState(positions=positions, directors=directors, moments=moments, forces=forces, twists=jnp.zeros(0))
+        twists = self.twists[i] if twisting else jnp.zeros(0)
+        state = SOCBState(positions=positions, directors=directors, moments=moments, forces=forces, twists=twists)
         zero = jnp.zeros((), jnp.int32)
         return Solution(positions=positions, tangents=tangents, angles=angles, moments=moments, curvatures=curvatures,
                         segment_forces=forces, reactions=reactions, result=row, iterations=jnp.asarray(self.iterations)[i],

@@ -199,7 +199,7 @@ def compress_at(model, displacement, at=None, *, unload=False, perturbation=None
     inner = linear_solver_for(loaded, settings.linear_solver)
     U, X, iterations, converged, stable, result, observed, u0 = _sampled(loaded, displacement, at, bool(unload),
                                                                         settings.traced(), inner)
-    positions, tangents, moments, forces, probe_force, axial = observed
+    positions, tangents, moments, forces, probe_force, axial, twists = observed
     crossed = jnp.any(surface_crossing(net, positions, U) & converged)
     result = RESULTS.where((result == RESULTS.successful) & crossed, RESULTS.surface_crossed, result)
     M = at.shape[0]
@@ -215,7 +215,8 @@ def compress_at(model, displacement, at=None, *, unload=False, perturbation=None
     out = CompressionResult(
         displacement=U, force=probe_force, converged=converged, stable=stable,
         phase=np.repeat(np.array([1, 2], np.int8)[: 2 if unload else 1], M), positions=positions, tangents=tangents,
-        moments=moments, segment_forces=forces, end_nodes=ends, end_forces=axial[:, ends], iterations=iterations,
+        moments=moments, segment_forces=forces, twists=twists, end_nodes=ends, end_forces=axial[:, ends],
+        iterations=iterations,
         result=result, network=loaded.network, limit_points=(), parameters_json=parameters_json(params))
     if not throw:
         return out

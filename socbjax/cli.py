@@ -21,7 +21,7 @@ from ._progress import plural  # stdlib only
 __all__ = ["main", "build_parser"]
 
 # Defaults stop before the first node crosses the surface (no contact model yet): the unit mesh's mother at
-# u ≈ 0.40 µm, the default 8-generation outcrop (seed 0) between u = 0.35 and 0.45 µm.
+# u ≈ 0.44 µm, the default 8-generation outcrop (seed 0) at u ≈ 0.33 µm (both with actin's twist).
 _DEFAULT_DISPLACEMENT = {"unit-mesh": 0.35, "outcrop": 0.2, "column": None}
 # The column's supports (socbjax.SUPPORTS, here without importing the solver); its default is
 # fit's: a clamped–pinned column (Euler load 20.19 EI/L²) crosses the surface at u ≈ 0.39 L,
@@ -71,6 +71,13 @@ def _add_simulate(sub) -> None:
     )
     sim.add_argument(
         "--EI", type=float, default=None, help="bending stiffness in pN·µm² (default: actin 0.071; column 1.0)"
+    )
+    sim.add_argument(
+        "--GJ",
+        default=None,
+        help="torsional stiffness in pN·µm² (3D networks; default: actin 8e-3 for unit-mesh and outcrop, Tsuda et al. "
+        "1996; torsion-free for a column), or 'none' for the paper's torsion-free model (about half the run time; "
+        "branch junctions then drop the moment about the mother's axis)",
     )
     sim.add_argument("--branch-angle", type=float, default=70.0, help="daughter–mother angle in degrees (default 70)")
     sim.add_argument("--generations", type=int, default=8, help="outcrop: branching generations (default 8)")
@@ -187,6 +194,22 @@ def _check_simulate(args) -> None:
         raise ValueError(f"--checkpoint-every must be a positive number of steps, got {args.checkpoint_every}")
     if args.network == "column":
         _supports(args.supports)
+    _torsion(args.GJ)
+
+
+def _torsion(text) -> dict:
+    """Builder keywords for ``--GJ``: {} (the builder's default), {"GJ": None} or {"GJ": value}."""
+    if text is None:
+        return {}
+    if text.strip().lower() == "none":
+        return {"GJ": None}
+    try:
+        value = float(text)
+    except ValueError:
+        value = math.nan
+    if not (math.isfinite(value) and value > 0):
+        raise ValueError(f"--GJ must be a positive torsional stiffness in pN·µm² or 'none' (torsion-free), got {text!r}")
+    return {"GJ": value}
 
 
 def _build(args):
@@ -196,15 +219,16 @@ def _build(args):
     if args.network == "column":
         supports = _supports(args.supports)
         EI = 1.0 if args.EI is None else args.EI
-        net = sj.column(args.nodes, length=args.length, EI=EI, supports=supports, dim=args.dim)
+        net = sj.column(args.nodes, length=args.length, EI=EI, supports=supports, dim=args.dim, **_torsion(args.GJ))
         params = dict(
-            network="column", nodes=args.nodes, length_um=args.length, EI=EI, supports=list(supports), dim=args.dim
+            network="column", nodes=args.nodes, length_um=args.length, EI=EI, supports=list(supports), dim=args.dim,
         )
-        return net, params, 0.3 * args.length
+        return net, _with_torsion(params, net), 0.3 * args.length
     EI = 0.071 if args.EI is None else args.EI
     pert = {} if args.perturbation is None else {"perturbation": args.perturbation}
+    torsion = _torsion(args.GJ)
     if args.network == "unit-mesh":
-        net = sj.unit_dendritic_mesh(EI=EI, branch_angle=args.branch_angle, dim=args.dim, **pert)
+        net = sj.unit_dendritic_mesh(EI=EI, branch_angle=args.branch_angle, dim=args.dim, **pert, **torsion)
         params = dict(network="unit-mesh", EI=EI, branch_angle=args.branch_angle, dim=args.dim, **pert)
     else:
         net = sj.dendritic_outcrop(
@@ -217,6 +241,7 @@ def _build(args):
             seed=args.seed,
             dim=args.dim,
             **pert,
+            **torsion,
         )
         params = dict(
             network="outcrop",
@@ -230,7 +255,14 @@ def _build(args):
             dim=args.dim,
             **pert,
         )
-    return net, params, _DEFAULT_DISPLACEMENT[args.network]
+    return net, _with_torsion(params, net), _DEFAULT_DISPLACEMENT[args.network]
+
+
+def _with_torsion(params: dict, net) -> dict:
+    """The run's parameters with the torsional stiffness used (pN·µm²; None: torsion-free)."""
+    import numpy as np
+
+    return {**params, "GJ": float(np.asarray(net.GJ).flat[0]) if net.twisting else None}
 
 
 def _check_outputs(args, out: Path, checkpoint: Path) -> None:

@@ -96,6 +96,18 @@ def test_every_network_and_fit_model_defaults_to_3d():
     assert socbjax.OutcropModel(generations=1, gap=2.0).base.dim == 3
 
 
+def test_simulate_twists_actin_networks_by_default_and_records_GJ():
+    parser = socbjax.cli.build_parser()
+
+    def built(*argv):
+        net, params, _ = socbjax.cli._build(parser.parse_args(["simulate", *argv, "--out", "x.h5"]))
+        return net.twisting, params["GJ"]
+
+    assert built("unit-mesh") == (True, socbjax.ACTIN_GJ) and built("outcrop", "--generations", "2")[0]
+    assert built("unit-mesh", "--GJ", "none") == (False, None) and built("unit-mesh", "--GJ", "0.02") == (True, 0.02)
+    assert built("column") == (False, None) and built("column", "--GJ", "0.5") == (True, 0.5)
+
+
 def test_column_supports_default_and_separator_match_fit():
     args = socbjax.cli._parser().parse_args(["simulate", "column", "--out", "x.h5"])
     assert args.supports == "clamped,pinned"
@@ -149,6 +161,7 @@ def _user_error(capsys, argv) -> str:
     (["simulate", "column", "--out", "{tmp}/missing/c.h5"], ["--out", "does not exist"]),
     (["simulate", "column", "--out", "{tmp}"], ["--out", "folder"]),
     (["simulate", "column", "--displacement", "5", "--out", "{tmp}/c.h5"], ["gap"]),
+    (["simulate", "unit-mesh", "--GJ", "-0.1", "--out", "{tmp}/c.h5"], ["--GJ", "'-0.1'", "'none'"]),
     (["plot", "{tmp}/nothing.h5"], ["nothing.h5"]),
     (["plot", "{tmp}/not-hdf5.h5"], ["not-hdf5.h5", "not a valid socbjax result"]),
     (["plot", "{tmp}/not-hdf5.h5", "--steps", "1,x"], ["--steps"]),

@@ -52,6 +52,7 @@ def path_result(dim=3, E=8, unload=True, N=4, planar=False, jump=False):
         tangents=np.broadcast_to(np.asarray(net.tangents), (K, N, dim)).copy(),
         moments=np.zeros((K, N, 3) if dim == 3 else (K, N)),
         segment_forces=np.zeros((K, S, dim)),
+        twists=np.zeros((K, 0)),
         end_nodes=np.arange(E) % N,
         end_forces=F[:, None] * weights[None, :],
         iterations=np.full(K, 3),

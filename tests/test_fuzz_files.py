@@ -30,7 +30,7 @@ def make_result(dim=2):
         stable=np.arange(K) % 3 != 2, phase=np.array([0, 1, 1, 1, 1, 2, 2], np.int8),
         positions=rng.normal(size=(K, N, dim)), tangents=rng.normal(size=(K, N, dim)),
         moments=rng.normal(size=(K, N) if dim == 2 else (K, N, 3)), segment_forces=rng.normal(size=(K, S, dim)),
-        end_nodes=np.array([0, 3]), end_forces=rng.normal(size=(K, 2)), iterations=np.full(K, 3, np.int32),
+        twists=np.zeros((K, 0)), end_nodes=np.array([0, 3]), end_forces=rng.normal(size=(K, 2)), iterations=np.full(K, 3, np.int32),
         limit_points=(LimitPoint("force_maximum", 3, 0.3, 1.2, "loading"), LimitPoint("fold", 5, 0.5, 0.1, "unloading"),
                       LimitPoint("surface_crossing", 6, 0.55, 0.0, "unloading")),
         result=sj.RESULTS.successful, network=net, parameters_json=json.dumps({"u_max": 0.6}),

@@ -40,6 +40,7 @@ def make_result(dim=3, K=7, N=4, E=1, seed=0, twisting=True):
         tangents=rng.normal(size=(K, N, dim)),
         moments=moments,
         segment_forces=rng.normal(size=(K, S, dim)),
+        twists=rng.normal(size=(K, N if dim == 3 and twisting else 0)),
         end_nodes=np.arange(E, dtype=np.int32),
         end_forces=rng.normal(size=(K, E)),
         iterations=rng.integers(1, 9, size=K).astype(np.int32),
@@ -99,7 +100,8 @@ def test_file_layout_units_and_stamps(tmp_path):
         # headers, out of HDF5's unchecksummed global heap.
         text = {name: f.attrs[name].decode() for name in ("format", "socbjax_version", "created", "result")}
         assert text["format"] == "socbjax.compression" and text["socbjax_version"] == sj.__version__
-        assert f.attrs["format_version"] == 3 and text["result"] == "max_steps"
+        assert f.attrs["format_version"] == 4 and text["result"] == "max_steps"
+        assert f["path/twists"].shape == (7, 4) and f["units"].attrs["twists"].decode() == "rad"
         assert f["units"].attrs["displacement"].decode() == "µm" and f["units"].attrs["moments"].decode() == "pN·µm"
         assert f["path/force"].attrs["units"].decode() == "pN"
         assert f["network"].attrs["dim"] == 3
@@ -189,7 +191,7 @@ def test_foreign_and_future_files_rejected(tmp_path):
     with pytest.raises(ValueError, match="socbjax.compression file"):
         sj.load_checkpoint(path)
     with h5py.File(path, "a") as f:
-        f.attrs["format_version"] = 4
+        f.attrs["format_version"] = 5
     with pytest.raises(ValueError, match="newer socbjax"):
         sj.load(path)
 
@@ -219,7 +221,7 @@ def test_checkpoint_round_trip_is_bitwise(tmp_path, rng):
         assert isinstance(got, np.ndarray) and got.dtype == value.dtype and got.shape == value.shape, name
         assert got.tobytes() == value.tobytes(), name
     with h5py.File(path, "r") as f:
-        assert f.attrs["format"].decode() == "socbjax.checkpoint" and f.attrs["format_version"] == 3
+        assert f.attrs["format"].decode() == "socbjax.checkpoint" and f.attrs["format_version"] == 4
     with pytest.raises(ValueError, match="socbjax.checkpoint file"):
         sj.load(path)
 
@@ -269,10 +271,36 @@ def test_reads_format_version_2_results_as_naturally_straight(tmp_path):
     with h5py.File(path, "a") as f:
         f.attrs["format_version"] = 2
         del f["network/natural_curvature"], f["network/GJ"], f["network/twisting"], f["network/directors"]
+        del f["path/twists"]
     assert_results_equal(result, sj.load(path))
     with h5py.File(path, "a") as f:
         f.attrs["format_version"] = 3
     with pytest.raises(ValueError, match=r"lacks \['natural_curvature', 'GJ', 'directors', 'twisting'\]"):
+        sj.load(path)
+
+
+def test_reads_format_version_3_results_without_frame_angles(tmp_path):
+    """Format 3 stored twisting networks but not the path's frame angles ψ: the result loads,
+    and only CompressionResult.solution (which needs ψ) says what is missing."""
+    result = make_result()
+    path = sj.save(result, tmp_path / "run.h5")
+    with h5py.File(path, "a") as f:
+        f.attrs["format_version"] = 3
+        del f["path/twists"]
+    back = sj.load(path)
+    assert back.twists.shape == (7, 0)
+    np.testing.assert_array_equal(back.positions, result.positions)
+    with pytest.raises(ValueError, match="format 3 or older"):
+        back.solution(1)
+    with h5py.File(path, "a") as f:
+        f.attrs["format_version"] = 4
+    with pytest.raises(ValueError, match=r"lacks \['twists'\]"):
+        sj.load(path)
+    path = sj.save(result, tmp_path / "wrong.h5")
+    with h5py.File(path, "a") as f:  # a twisting network's angles must be [K, N]
+        del f["path/twists"]
+        f["path/twists"] = np.zeros((7, 3))
+    with pytest.raises(ValueError, match=r"twists has shape \(7, 3\)"):
         sj.load(path)
 
 
@@ -285,7 +313,7 @@ def test_reads_format_version_1_results(tmp_path):
         del f.attrs["result"]
         f.attrs["status"] = 6  # MAX_STEPS in socbjax 0.1
         del f["network/couples"], f["network/leaving_segment"], f["network/natural_curvature"], f["network/GJ"]
-        del f["network/twisting"], f["network/directors"]
+        del f["network/twisting"], f["network/directors"], f["path/twists"]
     assert_results_equal(result, sj.load(path))
 
 

@@ -153,6 +153,20 @@ def test_screen_keeps_realisations_that_can_be_followed(flat):
         sj.LawnModel(screen=3.0, film_height=3.0, generations=2)
 
 
+@pytest.mark.slow  # 150 s: compiles a padded 3D Kirchhoff lawn
+def test_a_twisting_3d_lawn_is_its_own_outcrops_and_scales_with_ei():
+    """3D lawns twist by default (actin GJ); GJ scales with the fitted EI, so the force stays
+    exactly ∝ EI, and the padded lawn is the mean of its outcrops compressed on their own."""
+    lawn = sj.LawnModel(generations=2, n_outcrops=2, film_height=2.0, probe_area=5.0)
+    assert all(m.twisting for m in lawn.members)
+    c = np.array([0.0, 0.05, 0.1])
+    F = np.asarray(lawn.predict({"EI": 0.071, "density": 1.0}, c, reach=0.1))
+    np.testing.assert_allclose(np.asarray(lawn.predict({"EI": 0.142, "density": 1.0}, c, reach=0.1)), 2 * F,
+                               rtol=1e-9, atol=1e-12)
+    own = [np.asarray(sj.compress(m, 0.1, at=c[1:]).force) for m in lawn.members]
+    np.testing.assert_allclose(F[1:], 5.0 * np.mean(own, axis=0), rtol=1e-9)
+
+
 @pytest.mark.slow
 def test_screen_refuses_realisations_that_cross_the_surface():
     """Planar outcrops of 4 generations at a 3 µm film: seeds 0 and 1 cross the surface

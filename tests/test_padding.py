@@ -6,6 +6,7 @@ positions of the real nodes, surface-crossing status) and realisations of differ
 must share one topology (one compiled program), the universal tree of P (2^G − 1) segments.
 """
 
+import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
@@ -24,16 +25,44 @@ def test_seeds_share_the_universal_topology(gap):
     assert len(sj.universal_strands(G)) == 2 ** (G - 1)
 
 
-def test_padding_changes_nothing_on_the_real_nodes():
-    net = sj.dendritic_outcrop(generations=G, gap=3.0, seed=2, dim=2)  # 26 real segments of 30
+def assert_padding_changes_nothing(net, at, displacement):
     padded, nodes = sj.pad_outcrop(net, G)
     assert net.n_segments < padded.n_segments and np.asarray(padded.padding.active).sum() == net.n_nodes
     np.testing.assert_allclose(np.asarray(padded.positions)[nodes], np.asarray(net.positions))
-    own = sj.compress(net, 0.35, at=AT, throw=False)
-    pad = sj.compress(padded, 0.35, at=AT, throw=False)
+    own = sj.compress(net, displacement, at=at, throw=False)
+    pad = sj.compress(padded, displacement, at=at, throw=False)
+    assert own.completed or own.result == sj.RESULTS.surface_crossed
     np.testing.assert_allclose(pad.force, own.force, rtol=1e-9)
     np.testing.assert_allclose(pad.positions[:, nodes], own.positions, atol=1e-9)
+    np.testing.assert_allclose(pad.twists[:, nodes] if net.twisting else pad.twists, own.twists, atol=1e-9)
     assert int(pad.result._value) == int(own.result._value)
+    return padded, nodes
+
+
+@pytest.mark.parametrize("thermal", [False, True], ids=["straight", "thermal"])
+def test_padding_changes_nothing_on_the_real_nodes(thermal):
+    net = sj.dendritic_outcrop(generations=G, gap=3.0, seed=2, dim=2)  # 26 real segments of 30
+    if thermal:  # naturally curved real strands; the inert pieces stay straight
+        net = sj.thermal_network(net, seed=3)
+    padded, nodes = assert_padding_changes_nothing(net, AT, 0.35)
+    inert = np.ones(padded.n_segments, bool)
+    inert[[list(map(tuple, np.asarray(padded.segments))).index((nodes[a], nodes[b]))
+           for a, b in np.asarray(net.segments)]] = False
+    assert np.all(np.asarray(padded.natural_curvature)[inert] == 0)
+    np.testing.assert_array_equal(np.asarray(padded.natural_curvature)[~inert].sum(), np.asarray(net.natural_curvature).sum())
+    with pytest.raises(ValueError, match="shape first"):  # inert pieces must stay straight
+        sj.thermal_network(padded, seed=3)
+
+
+@pytest.mark.slow
+def test_padding_carries_twist_and_3d_natural_curvature():
+    """A 3D Kirchhoff outcrop (actin GJ) with thermal shapes: the padded network keeps every
+    real segment's GJ, rest Darboux vector and reference frame, and its equilibria and frame
+    angles are those of the unpadded one."""
+    net = sj.thermal_network(sj.dendritic_outcrop(generations=G, gap=3.0, seed=2, dim=3, GJ=sj.ACTIN_GJ), seed=3)
+    padded, nodes = assert_padding_changes_nothing(net, jnp.array([0.1]), 0.1)
+    assert padded.twisting
+    np.testing.assert_allclose(np.asarray(padded.directors)[nodes], np.asarray(net.directors), atol=1e-15)
 
 
 def test_crossing_status_counts_real_nodes_only():
@@ -68,3 +97,5 @@ def test_outcrops_that_do_not_fit_are_refused():
         sj.pad_outcrop(deep, 2)
     with pytest.raises(TypeError, match="network"):
         sj.pad_outcrop("outcrop", 3)
+    with pytest.raises(TypeError, match="concrete"):
+        jax.jit(lambda n: sj.pad_outcrop(n, 3)[0])(sj.dendritic_outcrop(generations=3, gap=3.0, dim=2))

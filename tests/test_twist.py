@@ -175,7 +175,7 @@ def test_gradients_with_respect_to_GJ_and_the_natural_curvature_match_finite_dif
 @pytest.mark.slow
 def test_twisting_networks_square_compress_and_save(tmp_path):
     mesh = sj.unit_dendritic_mesh(dim=3, GJ=8e-3)
-    assert mesh.twisting and not sj.unit_dendritic_mesh(dim=3).twisting
+    assert mesh.twisting
     model = sj.make_model(mesh)
     state = model.initial_state()
     assert model.residual(state, sj.Control.make(), model.frames(state)).size == model.n_unknowns
@@ -184,17 +184,53 @@ def test_twisting_networks_square_compress_and_save(tmp_path):
     back = sj.load(sj.save(result, tmp_path / "twist.h5"))
     assert back.network.topology == mesh.topology
     np.testing.assert_array_equal(back.network.GJ, mesh.GJ)
-    with pytest.raises(NotImplementedError, match="frame angles"):
-        result.solution(1)
+    np.testing.assert_array_equal(back.twists, result.twists)
+    assert result.twists.shape == (result.n_steps, mesh.n_nodes) and np.abs(result.twists).max() > 1e-6
+    frames = back.solution(result.n_steps - 1).material_frames()  # loaded back: ψ recorded in the file
+    np.testing.assert_allclose(np.einsum("nij,nkj->nik", frames, frames), np.broadcast_to(np.eye(3), frames.shape),
+                               atol=1e-12)
     with pytest.raises(ValueError, match="twisting"):
         sj.solve(sj.cantilever(3)).material_frames()
+
+
+@pytest.mark.slow
+def test_a_compressed_twisting_column_row_is_the_force_controlled_equilibrium():
+    """Each row of a displacement-controlled path of a curved, twisting column (with ψ
+    recorded) is the equilibrium that force control reaches under the recorded probe force:
+    positions, frame angles, material frames and the smooth curve agree to round-off."""
+    column = sj.column(5, dim=3, GJ=0.6, natural_curvature=[0.4, -0.3, 0.5])  # out-of-plane at rest
+    result = sj.compress(column, 0.1, at=np.array([0.05, 0.1]))
+    axis, tip = np.asarray(result.network.probe_direction), column.n_nodes - 1
+    for k in range(result.n_steps):
+        row = result.solution(k)
+        loads = np.asarray(result.network.loads).copy()  # the perturbation compress applied, and the probe force
+        loads[tip] += float(result.force[k]) * axis
+        reference = sj.solve(column.replace(loads=loads))
+        assert reference.result == sj.RESULTS.successful and np.abs(reference.state.twists).max() > 1e-3
+        np.testing.assert_allclose(row.state.twists, reference.state.twists, atol=1e-10)
+        np.testing.assert_allclose(row.positions, reference.positions, atol=1e-10)
+        np.testing.assert_allclose(row.material_frames(), reference.material_frames(), atol=1e-10)
+        np.testing.assert_allclose(row.curve().positions, reference.curve().positions, atol=1e-10)
+    assert sj.plot_snapshots(result).axes  # the smooth curves of a curved twisting path need its recorded ψ
+
+
+def test_actin_networks_twist_by_default_with_actins_torsional_stiffness():
+    """3D dendritic builders and their models default to actin's GJ (Tsuda et al. 1996:
+    8e-27 N·m² = 8e-3 pN·µm²); GJ=None is the paper's torsion-free model; 2D never twists."""
+    assert sj.ACTIN_GJ == pytest.approx(8e-27 / 1e-12 / 1e-12)  # N·m² -> pN·µm²
+    for net in (sj.unit_dendritic_mesh(), sj.dendritic_outcrop(generations=2), sj.UnitMeshModel().base,
+                sj.OutcropModel(generations=2).base, sj.LawnModel(generations=2, n_outcrops=1).base):
+        assert net.twisting and np.all(np.asarray(net.GJ) == sj.ACTIN_GJ)
+    for net in (sj.unit_dendritic_mesh(GJ=None), sj.dendritic_outcrop(generations=2, GJ=None),
+                sj.unit_dendritic_mesh(dim=2), sj.UnitMeshModel(GJ=None).base, sj.cantilever(3), sj.column(3)):
+        assert not net.twisting
+    lawn = sj.LawnModel(generations=2, n_outcrops=1)  # GJ scales with the fitted EI: force ∝ EI
+    np.testing.assert_allclose(np.asarray(lawn.network({"EI": 0.142}).GJ), 2 * sj.ACTIN_GJ)
 
 
 def test_what_twist_does_not_cover_yet_is_refused_with_the_reason():
     with pytest.raises(ValueError, match="torsion-free"):
         sj.solve(sj.cantilever(3, GJ=1.0), {2: [0, 0.1, 0]}, model="jointed")
-    with pytest.raises(ValueError, match="twisting"):
-        sj.pad_outcrop(sj.dendritic_outcrop(generations=2, GJ=8e-3), 2)
     with pytest.raises(ValueError, match="GJ"):
         sj.cantilever(3, GJ=-1.0)
     assert not sj.cantilever(3, dim=2, GJ=1.0).twisting  # planar filaments do not twist
