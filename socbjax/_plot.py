@@ -75,7 +75,7 @@ def step_curves(result, steps, points_per_segment: int = 12) -> np.ndarray:
     rows = np.concatenate([steps, np.full(batch - len(steps), steps[-1])])
     take = lambda a: jnp.asarray(np.asarray(a, dtype=float)[rows])
     twists = take(result.twists)
-    if result.network.twisting and twists.shape[-1] != result.network.n_nodes:  # a format-3 file: ψ not recorded
+    if not result.records_frame_angles:  # a format-3 file
         if np.any(np.asarray(result.network.natural_curvature) != 0):
             raise ValueError("this result of a curved twisting network has no material-frame angles (read from a "
                              "file of format 3 or older), which its smooth curves need; re-run the compression")

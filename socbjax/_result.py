@@ -112,6 +112,12 @@ class CompressionResult(eqx.Module):
         return next((p for p in self.limit_points if p.kind == "surface_crossing"), None)
 
     @property
+    def records_frame_angles(self) -> bool:
+        """False only for a twisting network's result read from a file of format 3 or older,
+        which did not record the frame angles ψ (``twists`` is then [K, 0])."""
+        return not self.network.twisting or self.twists.shape[-1] == self.network.n_nodes
+
+    @property
     def n_steps(self) -> int:
         return int(self.displacement.shape[0])
 
@@ -132,8 +138,7 @@ class CompressionResult(eqx.Module):
     def solution(self, i: int) -> Solution:
         """Row ``i`` as a :class:`socbjax.Solution` (curve, end rotations, deflection, reactions)."""
         net = self.network
-        twisting = net.twisting
-        if twisting and self.twists.shape[-1] != net.n_nodes:
+        if not self.records_frame_angles:
             raise ValueError("CompressionResult.solution: this result of a twisting network has no material-frame "
                              "angles (read from a file of format 3 or older, which did not record them); solve the "
                              "state you need with socbjax.solve, or use the recorded positions, tangents and moments")
@@ -149,7 +154,7 @@ class CompressionResult(eqx.Module):
             directors, curvatures = tangents, bending / EI[:, None]
         reactions = jnp.einsum("nij,nj->ni", jnp.asarray(net.position_projector), net_nodal_force(forces, net, net.loads))
         row = RESULTS.where(jnp.asarray(self.converged)[i], RESULTS.successful, RESULTS.not_reached)
-        twists = self.twists[i] if twisting else jnp.zeros(0)
+        twists = self.twists[i] if net.twisting else jnp.zeros(0)
         state = SOCBState(positions=positions, directors=directors, moments=moments, forces=forces, twists=twists)
         zero = jnp.zeros((), jnp.int32)
         return Solution(positions=positions, tangents=tangents, angles=angles, moments=moments, curvatures=curvatures,
