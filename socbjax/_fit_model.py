@@ -77,7 +77,12 @@ class FitModel:
             loads = jnp.zeros_like(self.base.loads)
         else:  # the builder's loads, scaled with EI so that forces scale exactly with EI
             loads = self.base.loads * (jnp.mean(EI) / jnp.mean(jnp.asarray(self.base.EI)))
-        return self.base.replace(positions=positions, tangents=tangents, lengths=lengths, EI=EI, loads=loads)
+        changes = dict(positions=positions, tangents=tangents, lengths=lengths, EI=EI, loads=loads)
+        if self.base.twisting:  # reference directors stay unit and ⊥ the (possibly traced) new tangents
+            t = tangents / jnp.linalg.norm(tangents, axis=-1, keepdims=True)
+            g = self.base.directors - jnp.sum(self.base.directors * t, axis=-1, keepdims=True) * t
+            changes["directors"] = g / jnp.linalg.norm(g, axis=-1, keepdims=True)
+        return self.base.replace(**changes)
 
 
     def probe_force(self, values: dict, u, *, reach: float, retract=None, method: str = "displacement",

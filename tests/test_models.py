@@ -9,11 +9,50 @@ import socbjax as sj
 from socbjax import ColumnModel, OutcropModel, UnitMeshModel
 
 
-def test_unit_mesh_geometry_at_its_own_angle_equals_the_builder():
-    model = UnitMeshModel(dim=2, branch_angle=70.0)
-    traced, built = model.network({"branch_angle": 70.0}), sj.unit_dendritic_mesh(branch_angle=70.0, dim=2)
-    for field in ("positions", "tangents", "lengths"):
-        np.testing.assert_allclose(np.asarray(getattr(traced, field)), np.asarray(getattr(built, field)), atol=1e-12)
+@pytest.mark.parametrize("dim", [2, 3])
+def test_unit_mesh_geometry_at_its_own_angle_equals_the_builder(dim):
+    """Also the reference material frames of the 3D (twisting) mesh, which stay unit and ⊥
+    the tangents when the branch angle moves."""
+    model = UnitMeshModel(dim=dim, branch_angle=70.0)
+    traced, built = model.network({"branch_angle": 70.0}), sj.unit_dendritic_mesh(branch_angle=70.0, dim=dim)
+    assert traced.twisting == built.twisting == (dim == 3)
+    for field in ("positions", "tangents", "lengths", "directors"):
+        np.testing.assert_allclose(np.asarray(getattr(traced, field)), np.asarray(getattr(built, field)), atol=1e-12,
+                                   err_msg=field)
+    moved = model.network({"branch_angle": 55.0})
+    if dim == 3:
+        g, t = np.asarray(moved.directors), np.asarray(moved.tangents)
+        np.testing.assert_allclose(np.linalg.norm(g, axis=1), 1.0, atol=1e-12)
+        np.testing.assert_allclose(np.sum(g * t, axis=1), 0.0, atol=1e-12)
+        other = sj.unit_dendritic_mesh(branch_angle=55.0)  # its daughter's reference frame
+        np.testing.assert_allclose(g[-1], np.asarray(other.directors)[-1], atol=1e-12)
+
+
+def test_a_custom_geometry_keeps_the_twisting_reference_frames_orthonormal():
+    """A FitModel whose geometry turns a twisting filament: the reference director is
+    projected onto the plane ⊥ the new tangent (the base director e_y is not ⊥ a tangent
+    turned toward +y)."""
+    import jax.numpy as jnp
+
+    class Turned(sj.FitModel):
+        name = "turned"
+
+        def __init__(self):
+            self.base = sj.probe_network(sj.cantilever(3, dim=3, GJ=0.5))  # along +x, director e_y
+            self.parameters = {"EI": sj.Parameter("EI", 1.0, "pN·µm²", lower=0.0),
+                               "angle": sj.Parameter("angle", 0.0, "deg")}
+            self.groups = {}
+
+        def geometry(self, values):
+            a = jnp.deg2rad(values.get("angle", 0.0))
+            t = jnp.array([jnp.cos(a), jnp.sin(a), 0.0])
+            s = jnp.array([0.0, 0.5, 1.0])[:, None]
+            return s * t, jnp.broadcast_to(t, (3, 3)), self.base.lengths
+
+    net = Turned().network({"angle": 30.0})
+    g, t = np.asarray(net.directors), np.asarray(net.tangents)
+    np.testing.assert_allclose(np.sum(g * t, axis=1), 0.0, atol=1e-12)
+    np.testing.assert_allclose(g, np.broadcast_to([-0.5, np.sqrt(3) / 2, 0.0], (3, 3)), atol=1e-12)
 
 
 @pytest.mark.parametrize("angle", [40.0, 55.0, 80.0])
