@@ -206,8 +206,9 @@ def unit_dendritic_mesh(
     mother's and in full moment balance (see :func:`socbjax.make_network`); ``GJ=None``: the
     torsion-free model of the paper (no twist unknowns, the daughter's azimuth carried by
     parallel transport; about half the run time, but the junction drops the moment about the
-    mother's axis).  Ignored in 2D (planar filaments do not twist).  ``natural_curvature``: the strands' rest shape, per segment or
-    one for all (:func:`socbjax.with_natural_curvature`; the mesh is built in that shape).
+    mother's axis).  Ignored in 2D (planar filaments do not twist).  ``natural_curvature``:
+    the strands' rest shape, per segment or one for all
+    (:func:`socbjax.with_natural_curvature`; the mesh is built in that shape).
 
     Limits (checked before anything is built or traced; ``TypeError`` for a wrong type,
     ``ValueError`` for a wrong value, naming the argument): ``EI``, ``mother_length``,
@@ -322,9 +323,10 @@ def dendritic_outcrop(
     ``seed`` of the azimuths (same seed, same network); ``dim`` 3 or 2; ``perturbation``
     lateral force per strand (default 1e-4 pN, well below thermal forces k_BT/ℓ ≈ 8e-3 pN);
     ``max_redraws`` per daughter; ``GJ`` torsional stiffness (pN·µm², default actin's 8e-3;
-    None: the paper's torsion-free model; see :func:`unit_dendritic_mesh`); ``natural_curvature`` the strands' rest shape (as for
-    :func:`unit_dendritic_mesh`).  See the module docstring for the growth rules.
-    Strand ends on the surface are the pinned nodes other than the probe node 0.
+    None: the paper's torsion-free model; see :func:`unit_dendritic_mesh`);
+    ``natural_curvature`` the strands' rest shape (as for :func:`unit_dendritic_mesh`).  See
+    the module docstring for the growth rules.  Strand ends on the surface are the pinned
+    nodes other than the probe node 0.
 
     Limits (checked before growing; ``TypeError`` for a wrong type, ``ValueError`` for a
     wrong value, naming the argument): ``generations`` an integer ≥ 1; ``gap``, ``growth``,

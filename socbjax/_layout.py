@@ -4,9 +4,9 @@ After :class:`socbjax._hdf5.Reader` has checked the file's objects (links, stora
 types, sizes), :func:`open_file` checks the ``format`` and ``format_version`` attributes and
 :func:`read_result` / :func:`read_checkpoint` the layout: every dataset present with the dtype
 kind and a shape consistent with the others (K steps, N nodes, S segments, d = dim ∈ {2, 3},
-E strand ends, L limit points, R node equations, w = N in a twisting network, else 0), index ranges (segments, attach, transfer and
-leaving segments, equation rows, end nodes, phases, limit-point steps), finite network values
-and the root attributes (known result name, parameters as a JSON object), so that a loaded
+E strand ends, L limit points, R node equations, w = N in a twisting network, else 0), index
+ranges (segments, attach, transfer and leaving segments, equation rows, end nodes, phases,
+limit-point steps), finite network values and the root attributes (known result name, parameters as a JSON object), so that a loaded
 result can be plotted and solved.  Problems raise :class:`socbjax._hdf5.InvalidFile`.
 """
 
@@ -45,7 +45,8 @@ MAX_MAGNITUDE = 1e100  # of any stored value (µm, pN, ...): beyond it plots ove
 _PATH_LAYOUT = {
     "displacement": ("f", "K"), "force": ("f", "K"), "converged": ("b", "K"), "stable": ("b", "K"),
     "phase": ("iu", "K"), "positions": ("f", "KNd"), "tangents": ("f", "KNd"), "moments": ("f", "KNm"),
-    "segment_forces": ("f", "KSd"), "twists": ("f", "Kw"), "end_nodes": ("iu", "E"), "end_forces": ("f", "KE"), "iterations": ("iu", "K"),
+    "segment_forces": ("f", "KSd"), "twists": ("f", "Kw"), "end_nodes": ("iu", "E"), "end_forces": ("f", "KE"),
+    "iterations": ("iu", "K"),
 }
 PATH_FIELDS = tuple(_PATH_LAYOUT)
 _NETWORK_LAYOUT = {
