@@ -6,8 +6,8 @@ types, sizes), :func:`open_file` checks the ``format`` and ``format_version`` at
 kind and a shape consistent with the others (K steps, N nodes, S segments, d = dim ∈ {2, 3},
 E strand ends, L limit points, R node equations, w = N in a twisting network, else 0), index
 ranges (segments, attach, transfer and leaving segments, equation rows, end nodes, phases,
-limit-point steps), finite network values and the root attributes (known result name, parameters as a JSON object), so that a loaded
-result can be plotted and solved.  Problems raise :class:`socbjax._hdf5.InvalidFile`.
+limit-point steps), finite network values and the root attributes (known result name,
+parameters as a JSON object), so that a loaded result can be plotted and solved.  Problems raise :class:`socbjax._hdf5.InvalidFile`.
 """
 
 from __future__ import annotations
