@@ -7,7 +7,8 @@ kind and a shape consistent with the others (K steps, N nodes, S segments, d = d
 E strand ends, L limit points, R node equations, w = N in a twisting network, else 0), index
 ranges (segments, attach, transfer and leaving segments, equation rows, end nodes, phases,
 limit-point steps), finite network values and the root attributes (known result name,
-parameters as a JSON object), so that a loaded result can be plotted and solved.  Problems raise :class:`socbjax._hdf5.InvalidFile`.
+parameters as a JSON object), so that a loaded result can be plotted and solved.  Problems
+raise :class:`socbjax._hdf5.InvalidFile`.
 """
 
 from __future__ import annotations
