@@ -10,6 +10,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from ._compress import compress
+from ._geometry import minimal_rotation
 from ._network import Network
 from ._parameters import NUISANCE_PARAMETERS, Parameter
 from ._probe import probe_gap
@@ -78,10 +79,10 @@ class FitModel:
         else:  # the builder's loads, scaled with EI so that forces scale exactly with EI
             loads = self.base.loads * (jnp.mean(EI) / jnp.mean(jnp.asarray(self.base.EI)))
         changes = dict(positions=positions, tangents=tangents, lengths=lengths, EI=EI, loads=loads)
-        if self.base.twisting:  # reference directors stay unit and ⊥ the (possibly traced) new tangents
-            t = tangents / jnp.linalg.norm(tangents, axis=-1, keepdims=True)
-            g = self.base.directors - jnp.sum(self.base.directors * t, axis=-1, keepdims=True) * t
-            changes["directors"] = g / jnp.linalg.norm(g, axis=-1, keepdims=True)
+        if self.base.twisting:  # reference directors carried to the (possibly traced) new tangents
+            unit = lambda v: v / jnp.linalg.norm(v, axis=-1, keepdims=True)  # noqa: E731
+            changes["directors"] = minimal_rotation(unit(jnp.asarray(self.base.tangents)), unit(tangents),
+                                                    jnp.asarray(self.base.directors))
         return self.base.replace(**changes)
 
 

@@ -29,9 +29,9 @@ def test_unit_mesh_geometry_at_its_own_angle_equals_the_builder(dim):
 
 
 def test_a_custom_geometry_keeps_the_twisting_reference_frames_orthonormal():
-    """A FitModel whose geometry turns a twisting filament: the reference director is
-    projected onto the plane ⊥ the new tangent (the base director e_y is not ⊥ a tangent
-    turned toward +y)."""
+    """A FitModel whose geometry turns a twisting filament: the reference director turns with
+    the tangent by the smallest rotation (the base director e_y is not ⊥ a tangent turned
+    toward +y)."""
     import jax.numpy as jnp
 
     class Turned(sj.FitModel):
