@@ -20,7 +20,7 @@ from ._network import Network
 from ._solution import RESULTS, result_message
 from ._twist import material_frames
 
-__all__ = ["Solution", "node_stiffness"]
+__all__ = ["Solution", "node_angles_and_curvatures", "node_stiffness"]
 
 MAX_CURVE_POINTS = 10_000  # points per segment of Solution.curve: far beyond what plots or integrals need
 
@@ -30,6 +30,18 @@ def node_stiffness(network: Network):
     seg = np.concatenate([network.segments[:, 0], network.segments[:, 1]])
     total = jnp.zeros(network.n_nodes).at[seg].add(jnp.concatenate([network.EI, network.EI]))
     return total / np.maximum(np.bincount(seg, minlength=network.n_nodes), 1)
+
+
+def node_angles_and_curvatures(network: Network, tangents, moments):
+    """(angles, curvatures) at the nodes of an equilibrium: 2D the tangent angle [N] (rad,
+    in (−π, π]) and m/EI [N] (1/µm); 3D (azimuth, elevation) [N, 2] (rad) and the bending
+    part of the moment over EI, (m − (m·t) t)/EI [N, 3] (1/µm): a twisting part goes to GJ."""
+    EI = node_stiffness(network)
+    if network.dim == 2:
+        return jnp.arctan2(tangents[:, 1], tangents[:, 0]), moments / EI
+    angles = jnp.stack([jnp.arctan2(tangents[:, 1], tangents[:, 0]), jnp.arcsin(jnp.clip(tangents[:, 2], -1, 1))], -1)
+    bending = moments - jnp.sum(moments * tangents, axis=1, keepdims=True) * tangents
+    return angles, bending / EI[:, None]
 
 
 class Solution(eqx.Module):

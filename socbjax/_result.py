@@ -17,7 +17,7 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array
 
-from ._equilibrium import Solution, node_stiffness
+from ._equilibrium import Solution, node_angles_and_curvatures
 from ._network import Network
 from ._residual import SOCBState, net_nodal_force
 from ._solution import RESULTS, result_message
@@ -144,14 +144,8 @@ class CompressionResult(eqx.Module):
                              "state you need with socbjax.solve, or use the recorded positions, tangents and moments")
         i = int(i) if not isinstance(i, (jnp.ndarray, np.ndarray)) else i
         positions, tangents, moments, forces = (self.positions[i], self.tangents[i], self.moments[i], self.segment_forces[i])
-        EI = node_stiffness(net)
-        if net.dim == 2:
-            angles = jnp.arctan2(tangents[:, 1], tangents[:, 0])
-            directors, curvatures = angles, moments / EI
-        else:
-            angles = jnp.stack([jnp.arctan2(tangents[:, 1], tangents[:, 0]), jnp.arcsin(jnp.clip(tangents[:, 2], -1, 1))], -1)
-            bending = moments - jnp.sum(moments * tangents, axis=1, keepdims=True) * tangents  # the twisting part out
-            directors, curvatures = tangents, bending / EI[:, None]
+        angles, curvatures = node_angles_and_curvatures(net, tangents, moments)
+        directors = angles if net.dim == 2 else tangents
         reactions = jnp.einsum("nij,nj->ni", jnp.asarray(net.position_projector), net_nodal_force(forces, net, net.loads))
         row = RESULTS.where(jnp.asarray(self.converged)[i], RESULTS.successful, RESULTS.not_reached)
         twists = self.twists[i] if net.twisting else jnp.zeros(0)

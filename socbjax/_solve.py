@@ -23,7 +23,7 @@ from jax.flatten_util import ravel_pytree
 
 from ._adjoint import ImplicitAdjoint
 from ._checks import check_array, check_bool, check_int, check_real, describe
-from ._equilibrium import Solution, node_stiffness
+from ._equilibrium import Solution, node_angles_and_curvatures
 from ._jointed import JointedModel
 from ._network import Network, is_traced
 from ._path import (
@@ -168,14 +168,9 @@ def _package(model, x, stats, state0) -> Solution:
     state = ravel_pytree(state0)[1](x)
     result, load_factor, steps, cutbacks, iterations, residual_norm = stats
     tangents, moments = model.tangents(state), model.node_moments(state)
-    EI = node_stiffness(net)
-    if net.dim == 2:
-        angles = state.directors if isinstance(model, SOCBModel) else jnp.arctan2(tangents[:, 1], tangents[:, 0])
-        curvatures = moments / EI
-    else:
-        angles = jnp.stack([jnp.arctan2(tangents[:, 1], tangents[:, 0]), jnp.arcsin(jnp.clip(tangents[:, 2], -1, 1))], -1)
-        bending = moments - jnp.sum(moments * tangents, axis=1, keepdims=True) * tangents  # without the twisting part
-        curvatures = bending / EI[:, None]
+    angles, curvatures = node_angles_and_curvatures(net, tangents, moments)
+    if net.dim == 2 and isinstance(model, SOCBModel):
+        angles = state.directors  # the unknowns themselves: unwrapped beyond ±π where the filament turns
     reactions = net_nodal_force(state.forces, net, load_factor * net.loads)  # the force the support applies
     reactions = jnp.einsum("nij,nj->ni", jnp.asarray(net.position_projector), reactions)
     return Solution(positions=state.positions, tangents=tangents, angles=angles, moments=moments, curvatures=curvatures,
