@@ -36,6 +36,8 @@ __all__ = [
     "compress_ensemble", "EnsembleResult", "PathSettings", "NaturalParameter", "PseudoArclength", "Checkpoint",
     "follow_path", "start_path", "PathProblem", "PathState", "StepRecorder", "NoRecorder",
     "RESULTS", "ConvergenceError", "default_atol",
+    # contact
+    "Contact", "Plane", "Sphere",
     # solver parts
     "DampedNewton", "ImplicitAdjoint", "DenseLU", "ColouredSparseLU", "Bordered", "linear_solver_for", "make_model", "MODELS",
     "SOCBModel", "SOCBState", "JointedModel", "JointedState", "Control",

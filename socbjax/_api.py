@@ -19,6 +19,7 @@ from ._builders import SUPPORTS, arc, cantilever, column, crimped_fibre, helix  
 from ._cache import enable_compilation_cache  # noqa: E402
 from ._compare import ModelComparison, compare_models  # noqa: E402
 from ._compress import compress  # noqa: E402
+from ._contact import Contact, Plane, Sphere  # noqa: E402
 from ._curve import FilamentCurve  # noqa: E402
 from ._curved import ACTIN_GJ, with_natural_curvature  # noqa: E402
 from ._dendritic import dendritic_outcrop, unit_dendritic_mesh  # noqa: E402

@@ -16,6 +16,8 @@ from pathlib import Path
 
 import equinox as eqx
 
+from ._contact import Contact
+from ._contact_model import contact_setup
 from ._network import Network, is_traced
 from ._path import PathSettings
 from ._probe import (
@@ -46,7 +48,7 @@ def _checkpoint(checkpoint) -> Checkpoint | None:
 
 def compress(network: Network, displacement, *, at=None, unload: bool = False, method: str | None = None,
              perturbation=None, settings: PathSettings | None = None, checkpoint=None, progress: bool = False,
-             throw: bool = True, parameters: dict | None = None) -> CompressionResult:
+             throw: bool = True, parameters: dict | None = None, contact: Contact | None = None) -> CompressionResult:
     """Compress ``network`` with its probe by ``displacement`` µm (and withdraw it if ``unload``).
 
     Parameters
@@ -86,13 +88,18 @@ def compress(network: Network, displacement, *, at=None, unload: bool = False, m
         partial result is ``error.result``; under ``jax.jit`` an ``equinox`` runtime error);
         with ``throw=False`` check ``result.completed`` / ``result.result``.
     parameters : extra JSON-able metadata stored in the result (e.g. builder arguments).
+    contact : None (default: no contact, filaments pass through each other and the surfaces)
+        or a :class:`socbjax.Contact`: with ``surfaces=True`` the probe face and the substrate
+        become rigid frictionless planes, plus the contact's own planes and spheres (2D
+        networks so far).  The result then reports ``contact_count``, ``min_gap`` and
+        ``contact_force`` per step, and the probe force includes the probe face's contacts.
     """
     network, displacement = check_compress_inputs(network, displacement, unload=unload, method=method,
                                                   perturbation=perturbation, parameters=parameters, throw=throw,
                                                   progress=progress)  # all before any work
     settings = compress_settings(settings, method, displacement)
     checkpoint = _checkpoint(checkpoint)
-    model = SOCBModel(network, get_quadrature(settings.quadrature_order))
+    model = SOCBModel(network, get_quadrature(settings.quadrature_order), contact_setup(network, contact))
     if at is not None or is_traced(network, perturbation, displacement):
         if checkpoint is not None:
             raise ValueError("checkpoint applies to full paths; compress(..., at=...) is one traced computation")

@@ -33,9 +33,10 @@ from ._version import __version__
 __all__ = ["CHECKPOINT_FORMAT", "FORMAT_VERSION", "MAX_MAGNITUDE", "PATH_FIELDS", "RESULT_FORMAT", "limit_point_kind",
            "open_file", "read_checkpoint", "read_result"]
 
-# 4: the path's frame angles (twists); 3: natural curvature, GJ and twisting; 2: result name
-# (RESULTS), couples, topology; 1 to 3 still readable
-FORMAT_VERSION = 4
+# 5: contact outputs (count, min gap, force, slot points and forces); 4: the path's frame
+# angles (twists); 3: natural curvature, GJ and twisting; 2: result name (RESULTS), couples,
+# topology; 1 to 4 still readable
+FORMAT_VERSION = 5
 RESULT_FORMAT = "socbjax.compression"
 CHECKPOINT_FORMAT = "socbjax.checkpoint"
 # Limit-point kinds are open-ended (force_maximum, fold, surface_crossing, ...): any identifier
@@ -47,8 +48,10 @@ _PATH_LAYOUT = {
     "displacement": ("f", "K"), "force": ("f", "K"), "converged": ("b", "K"), "stable": ("b", "K"),
     "phase": ("iu", "K"), "positions": ("f", "KNd"), "tangents": ("f", "KNd"), "moments": ("f", "KNm"),
     "segment_forces": ("f", "KSd"), "twists": ("f", "Kw"), "end_nodes": ("iu", "E"), "end_forces": ("f", "KE"),
-    "iterations": ("iu", "K"),
+    "iterations": ("iu", "K"), "contact_count": ("iu", "K"), "min_gap": ("f", "K"), "contact_force": ("f", "K"),
+    "contact_points": ("f", "Kcd"), "contact_forces": ("f", "Kcd"),
 }
+_CONTACT_FIELDS = ("contact_count", "min_gap", "contact_force", "contact_points", "contact_forces")  # format 5
 PATH_FIELDS = tuple(_PATH_LAYOUT)
 _NETWORK_LAYOUT = {
     "positions": ("f", "Nd"), "segments": ("iu", "S2"), "tangents": ("f", "Nd"), "lengths": ("f", "S"),
@@ -187,9 +190,14 @@ def _read_network(reader: Reader, version: int) -> tuple[Network, _Sizes]:
 def _read_path(reader: Reader, sizes: _Sizes, version: int) -> dict[str, np.ndarray]:
     if "path" not in reader.datasets:
         raise InvalidFile("the group /path is missing")
-    arrays = _read_group(reader, sizes, "path", _PATH_LAYOUT, ("twists",) if version < 4 else ())
+    optional = (("twists",) if version < 4 else ()) + (_CONTACT_FIELDS if version < 5 else ())
+    arrays = _read_group(reader, sizes, "path", _PATH_LAYOUT, optional)
+    K = arrays["displacement"].shape[0]
     if "twists" not in arrays:  # before format 4: not recorded (CompressionResult.solution says so)
-        arrays["twists"] = np.zeros((arrays["displacement"].shape[0], 0))
+        arrays["twists"] = np.zeros((K, 0))
+    if "contact_count" not in arrays:  # before format 5: no contact model
+        arrays.update(contact_count=np.zeros(K, np.int32), min_gap=np.full(K, np.nan), contact_force=np.zeros(K),
+                      contact_points=np.zeros((K, 0, sizes.dim)), contact_forces=np.zeros((K, 0, sizes.dim)))
     if arrays["displacement"].shape[0] == 0:
         raise InvalidFile("/path has no steps (K = 0); a result holds at least its start")
     _check_range("/path/phase", arrays["phase"], len(PHASES), f"phases {dict(enumerate(PHASES))}")

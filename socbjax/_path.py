@@ -230,6 +230,12 @@ class PathProblem(eqx.Module):
     def frames(self, x):
         return self.model.frames(self.unravel()(x))
 
+    def admissible(self, x0, x1):
+        """Whether the step x0 → x1 passes the model's own test (contact: no filament moved
+        through an obstacle; :meth:`socbjax.SOCBModel.step_admissible`); True if it has none."""
+        test = getattr(self.model, "step_admissible", None)
+        return jnp.asarray(True) if test is None else test(self.unravel()(x0), self.unravel()(x1))
+
 
 def _norm(weights, v):
     return jnp.sqrt(jnp.maximum(jnp.sum(weights * v * v), 0.0))
@@ -401,6 +407,7 @@ def _attempt(c: PathState, problem, param, settings, newton, recorder) -> PathSt
     y1, result, iterations, sign, v, residual_norm = _correct(problem, guess, border, newton)
     converged = result == RESULTS.successful
     ok, tau1, sign_flip, fold = _accept(c, problem, param, settings, y, guess, y1, converged, sign, v)
+    ok = ok & (problem.admissible(c.x, y1[:-1]) | ~c.primed)
     primed = c.primed
     fast = iterations <= settings.fast_iterations
     grown = jnp.minimum(jnp.where(fast, settings.grow, 1.0) * c.ds, settings.max_step)

@@ -18,11 +18,11 @@ from ._checks import check_bool, check_choice, check_real, describe
 from ._network import Network, add_direction, is_traced
 from ._path import PROBE_PATH, PathSettings
 from ._perturbation import default_perturbation, perturbation_pattern, perturbation_plan, strand_segments
-from ._residual import routed_nodal_force, state_tangents
+from ._residual import Control, routed_nodal_force, state_tangents
 from ._result import PHASES, CompressionResult, LimitPoint
 from ._solution import RESULTS, result_name
 
-__all__ = ["probe_network", "probe_gap", "applied_loads", "observe", "observe_rows", "compress_settings", "end_nodes",
+__all__ = ["probe_network", "probe_gap", "probe_frame", "applied_loads", "observe", "observe_rows", "compress_settings", "end_nodes",
            "check_compress_inputs", "check_compress_options", "package_path", "parameters_json", "surface_crossing"]
 
 
@@ -59,7 +59,7 @@ def end_nodes(network: Network) -> np.ndarray:
     return np.flatnonzero(fixed & ~network.probe & ~network.attached)
 
 
-def _probe_frame(network: Network):
+def probe_frame(network: Network):
     """(origin, gap) of the probe's frame: the reference position of the probe face, the
     probe nodes' mean moved back along the probe direction to the rearmost probe node (the
     face touches every held tip; they are coplanar in straight outcrops, not in thermally
@@ -85,7 +85,7 @@ def _probe_frame(network: Network):
 def probe_gap(network: Network) -> float:
     """Largest probe travel (µm) before the probe meets the farthest opposing support (inf if
     none; host side, concrete positions)."""
-    gap = _probe_frame(network)[1]
+    gap = probe_frame(network)[1]
     gap = np.inf if gap is None else float(gap)
     return np.inf if gap == -np.inf else gap  # -inf: a padded network without pins
 
@@ -105,7 +105,7 @@ def surface_crossing(network: Network, positions, displacement):
     contact exists (no contact model yet) a crossing is a flagged status, never success."""
     padded = network.padding is not None
     xp = jnp if padded or is_traced(positions, displacement) or isinstance(positions, jax.Array) else np
-    origin, gap = _probe_frame(network)
+    origin, gap = probe_frame(network)
     if gap is None:
         return xp.zeros(np.shape(displacement), bool)
     tol = CROSSING_TOLERANCE * (1.0 + xp.abs(gap))
@@ -210,21 +210,39 @@ def check_compress_options(*, unload=False, method=None, perturbation=None, para
 
 
 @eqx.filter_jit
-def observe(model, X, loads):
-    """Per row of flat states X [K, n]: positions, tangents, moments, segment forces, probe
-    force (compressive positive), the axial force at every node and the material-frame angles
-    ψ [N] (rad) of a twisting network ([0] otherwise)."""
+def observe(model, X, loads, U=None):
+    """Per row of flat states X [K, n] (probe displacements U [K] µm, for the moving probe
+    face of contact): positions, tangents, moments, segment forces, probe force (compressive
+    positive; with contact the probe face's contact forces included), the axial force at
+    every node, the material-frame angles ψ [N] (rad) of a twisting network ([0] otherwise),
+    and the contact outputs: count, minimum gap (µm; NaN without obstacles), total contact
+    force (pN, the sum of the magnitudes), contact points [c, d] (µm) and forces [c, d] (pN)
+    of the c = S·C slots (zero force: not in contact)."""
     net = model.network
     _, unravel = ravel_pytree(model.initial_state())
+    U = jnp.zeros(X.shape[0]) if U is None else jnp.asarray(U)
+    contact = getattr(model, "contact", None)
+    axis = jnp.asarray(net.probe_direction)
 
-    def one(x):
+    def one(x, u):
         st = unravel(x)
-        axial = routed_nodal_force(st.forces, net, loads) @ jnp.asarray(net.probe_direction)
+        end_forces, extra = model.contact_ends(st) if contact is not None else (None, 0.0)
+        axial = routed_nodal_force(st.forces, net, loads + extra, end_forces) @ axis
         twists = getattr(st, "twists", jnp.zeros(0))  # the jointed baseline has no frame angles
-        return (st.positions, state_tangents(st.directors, net.dim), st.moments, st.forces,
-                jnp.sum(jnp.where(net.probe, axial, 0.0)), -axial, twists)
+        probe = jnp.sum(jnp.where(net.probe, axial, 0.0))
+        if contact is None:
+            empty = jnp.zeros((0, net.dim))
+            outputs = (jnp.zeros((), jnp.int32), jnp.asarray(jnp.nan), jnp.zeros(()), empty, empty)
+        else:
+            points, gaps, F, counted = model.contact_geometry(st, Control.make(1.0, u))
+            touching = counted & (jnp.linalg.norm(F, axis=-1) > 0)
+            probe = probe + jnp.sum(jnp.where(contact.moving[None, :] > 0, F @ axis, 0.0))
+            outputs = (jnp.sum(touching).astype(jnp.int32), jnp.min(jnp.where(counted, gaps, jnp.inf)),
+                       jnp.sum(jnp.linalg.norm(F, axis=-1)), points.reshape(-1, net.dim), F.reshape(-1, net.dim))
+        return (st.positions, state_tangents(st.directors, net.dim), st.moments, st.forces, probe, -axial, twists,
+                *outputs)
 
-    return jax.vmap(one)(X)
+    return jax.vmap(one)(X, U)
 
 
 def _limit_points(U, F, SIGN, PHASE) -> tuple[LimitPoint, ...]:
@@ -259,20 +277,26 @@ def parameters_json(params: dict) -> str:
     return json.dumps(params, default=lambda o: o.tolist() if hasattr(o, "tolist") else float(o), sort_keys=True)
 
 
-def observe_rows(model, X: np.ndarray, capacity: int):
-    """:func:`observe` of the K rows of X [K, n] (host), padded to ``capacity`` rows so that
-    paths of any length share one compiled program."""
+def observe_rows(model, X: np.ndarray, capacity: int, U: np.ndarray | None = None):
+    """:func:`observe` of the K rows of X [K, n] (host; probe displacements U [K] µm), padded
+    to ``capacity`` rows so that paths of any length share one compiled program."""
     K = X.shape[0]
     padded = np.zeros((max(capacity, K), X.shape[1]), X.dtype)
     padded[:K] = X
     padded[K:] = X[-1]
-    return [np.asarray(a)[:K] for a in observe(model, jnp.asarray(padded), model.network.loads)]
+    u = np.zeros(padded.shape[0])
+    if U is not None:
+        u[:K] = U
+        u[K:] = U[-1]
+    return [np.asarray(a)[:K] for a in observe(model, jnp.asarray(padded), model.network.loads, jnp.asarray(u))]
 
 
 def package_path(model, rec, extra, result, settings, u_max, unload, parameters) -> CompressionResult:
     net = model.network
     capacity = settings.max_steps * (3 if unload else 2) + 1  # settle point + every phase's buffer
-    positions, tangents, moments, forces, probe_force, axial, twists = observe_rows(model, rec["X"], capacity)
+    observed = observe_rows(model, rec["X"], capacity, np.asarray(rec["U"]))
+    positions, tangents, moments, forces, probe_force, axial, twists = observed[:7]
+    count, min_gap, contact_force, contact_points, contact_forces = observed[7:]
     ends = end_nodes(net)
     sign_ref = extra.get("sign_ref", rec["SIGN"][0])
     params = {"displacement_um": u_max, "unload": bool(unload), "method": settings.method, "sampled": False,
@@ -293,7 +317,8 @@ def package_path(model, rec, extra, result, settings, u_max, unload, parameters)
         displacement=np.asarray(rec["U"]), force=probe_force, converged=np.ones(len(rec["U"]), bool),
         stable=rec["SIGN"] == sign_ref, phase=rec["PHASE"].astype(np.int8), positions=positions, tangents=tangents,
         moments=moments, segment_forces=forces, twists=twists, end_nodes=ends, end_forces=axial[:, ends],
-        iterations=rec["ITER"].astype(np.int32), result=result, network=net,
+        iterations=rec["ITER"].astype(np.int32), contact_count=count, min_gap=min_gap, contact_force=contact_force,
+        contact_points=contact_points, contact_forces=contact_forces, result=result, network=net,
         limit_points=events, parameters_json=parameters_json(params),
     )
 

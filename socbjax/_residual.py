@@ -41,6 +41,7 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, Float
 
+from ._contact_segment import SLOT_WIDTH, ContactSetup, contact_segment_rows, initial_slots
 from ._geometry import orthonormal_complement
 from ._junction import director_targets, moment_transfer, nodal_couple_transfer
 from ._network import Network, node_row_width
@@ -90,6 +91,7 @@ class SOCBState(eqx.Module):
     moments: Array  # 2D: [N] (pN·µm); 3D: [N, 3]
     forces: Float[Array, "S d"]  # internal force per segment (pN)
     twists: Array  # material-frame angles [N] (rad) of a twisting network, else [0]
+    contacts: Array  # contact slots [S, C, 5] (σ, F pN, θ rad, κ 1/µm; socbjax._contact_segment), C = 0 without
 
 
 def n_twists(network: Network) -> int:
@@ -111,19 +113,23 @@ def reference_scales(network: Network):
     return length, EI, EI / length**2
 
 
-def net_nodal_force(forces: Float[Array, "S d"], network: Network, loads: Float[Array, "N d"]) -> Float[Array, "N d"]:
+def net_nodal_force(forces: Float[Array, "S d"], network: Network, loads: Float[Array, "N d"],
+                    end_forces: Array | None = None) -> Float[Array, "N d"]:
     """Σ_{ending} n − Σ_{starting} n − F at each node (pN): zero at free nodes, and the
-    reaction force that the support exerts on the node at supported ones."""
+    reaction force that the support exerts on the node at supported ones.  ``end_forces``:
+    the segments' internal forces at their ends where interior point forces (contact) make
+    them differ from ``forces`` (at their starts)."""
     n_nodes = network.n_nodes
-    ending = jax.ops.segment_sum(forces, network.segments[:, 1], num_segments=n_nodes)
+    end_forces = forces if end_forces is None else end_forces
+    ending = jax.ops.segment_sum(end_forces, network.segments[:, 1], num_segments=n_nodes)
     starting = jax.ops.segment_sum(forces, network.segments[:, 0], num_segments=n_nodes)
     return ending - starting - loads
 
 
-def routed_nodal_force(forces, network: Network, loads) -> Float[Array, "N d"]:
+def routed_nodal_force(forces, network: Network, loads, end_forces=None) -> Float[Array, "N d"]:
     """:func:`net_nodal_force` with each daughter base's share moved to its mother node, so
     that a junction balances all three segment ends at once (zero at daughter bases)."""
-    imbalance = net_nodal_force(forces, network, loads)
+    imbalance = net_nodal_force(forces, network, loads, end_forces)
     return jax.ops.segment_sum(imbalance, network.attach, num_segments=network.n_nodes)
 
 
@@ -174,20 +180,28 @@ def _segment_rows(state, network, quad, frames, m_start):
 
 
 def socb_residual(state: SOCBState, network: Network, control: Control, frames: Float[Array, "S 2 3"],
-                  quad: SegmentQuadrature) -> Float[Array, " R"]:
-    """The full SOCB residual vector (dimensionless), segment rows first, then node rows."""
+                  quad: SegmentQuadrature, contact: ContactSetup | None = None) -> Float[Array, " R"]:
+    """The full SOCB residual vector (dimensionless): segment rows, node rows, and with
+    ``contact`` the contact slots' rows last."""
     r, d, m = state.positions, state.directors, state.moments
     length_ref, EI_ref, _ = reference_scales(network)
     junction_segment, junction_node = moment_transfer(state, network)
     couple_segment, couple_node = nodal_couple_transfer(control.load_factor * network.couples, network)
-    seg = _segment_rows(state, network, quad, frames, m[network.segments[:, 0]] - junction_segment - couple_segment)
-    imbalance = routed_nodal_force(state.forces, network, control.load_factor * network.loads)
+    m_start = m[network.segments[:, 0]] - junction_segment - couple_segment
+    end_forces, slot_rows, loads = None, jnp.zeros(0), control.load_factor * network.loads
+    if contact is not None:
+        seg, slot_rows, end_forces, start_loads, _, _ = contact_segment_rows(r, d, m, m_start, state.forces,
+                                                                             state.contacts, network, contact, control, quad)
+        loads = loads + jax.ops.segment_sum(start_loads, network.segments[:, 0], num_segments=network.n_nodes)
+    else:
+        seg = _segment_rows(state, network, quad, frames, m_start)
+    imbalance = routed_nodal_force(state.forces, network, loads, end_forces)
     support = support_rows(r, imbalance, network, control)
     end_moment = (m - junction_node - couple_node) * (length_ref / EI_ref)
     if network.dim == 2:  # angles agree modulo 2π (arctan2 of the reference wraps at ±π)
         director_error = planar_turn(0.0, d - director_targets(d, network))
         candidates = jnp.concatenate([support, director_error[:, None], end_moment[:, None]], axis=1)
-        return jnp.concatenate([seg.ravel(), candidates.ravel()[network.socb_rows]])
+        return jnp.concatenate([seg.ravel(), candidates.ravel()[network.socb_rows], slot_rows.ravel()])
     norm_row = 0.5 * (jnp.sum(d * d, axis=1) - 1.0)
     torsion_free = jnp.sum(m * d, axis=1) * (length_ref / EI_ref)
     if network.twisting:  # the whole frame is fixed at clamps and daughter bases
@@ -201,7 +215,7 @@ def socb_residual(state: SOCBState, network: Network, control: Control, frames: 
     return jnp.concatenate([seg.ravel(), candidates.ravel()[network.socb_rows]])
 
 
-def socb_structure(network: Network):
+def socb_structure(network: Network, n_obstacles: int = 0):
     """Graph structure of the SOCB system, for sparse Jacobians (host side, numpy).
 
     Vertices are the nodes (0..N−1) and segments (N..N+S−1); edges join a segment to its two
@@ -220,6 +234,8 @@ def socb_structure(network: Network):
     ])
     seg_rows, width = (4, 4) if d == 2 else (9 if network.twisting else 7, node_row_width(network))
     rows = np.concatenate([np.repeat(n_nodes + np.arange(n_seg), seg_rows), np.asarray(network.socb_rows) // width])
+    slots = np.repeat(n_nodes + np.arange(n_seg), n_obstacles * SLOT_WIDTH)  # contact slots: at their segment
+    unknown, rows = np.concatenate([unknown, slots]), np.concatenate([rows, slots])
     seg, attach = np.asarray(network.segments), np.asarray(network.attach)
     daughters = np.flatnonzero(attach != node_ids)
     edges = np.concatenate([
@@ -232,10 +248,12 @@ def socb_structure(network: Network):
 
 class SOCBModel(eqx.Module):
     """The SOCB discretisation of a network, as used by the solvers: ``network`` (values
-    traced) and the Gauss–Legendre ``quad`` (static; Eq. 7, default order 8)."""
+    traced), the Gauss–Legendre ``quad`` (static; Eq. 7, default order 8) and the
+    ``contact`` set-up (None: no contact; :mod:`socbjax._contact_model`)."""
 
     network: Network
     quad: SegmentQuadrature = eqx.field(static=True)
+    contact: ContactSetup | None = None
     name = "socb"
 
     def initial_state(self) -> SOCBState:
@@ -246,23 +264,81 @@ class SOCBModel(eqx.Module):
         else:
             directors, moments = net.tangents, jnp.zeros((net.n_nodes, 3))
         return SOCBState(positions=net.positions, directors=directors, moments=moments,
-                         forces=jnp.zeros((net.n_segments, net.dim)), twists=jnp.zeros(n_twists(net)))
+                         forces=jnp.zeros((net.n_segments, net.dim)), twists=jnp.zeros(n_twists(net)),
+                         contacts=initial_slots(net, self.contact, directors))
 
     @property
     def n_unknowns(self) -> int:
         """Size of the flat state (host side, no tracing)."""
         net, w = self.network, (1 if self.network.dim == 2 else 3)
-        return net.n_nodes * (net.dim + 2 * w) + net.n_segments * net.dim + n_twists(net)
+        return (net.n_nodes * (net.dim + 2 * w) + net.n_segments * (net.dim + self.n_obstacles * SLOT_WIDTH)
+                + n_twists(net))
+
+    @property
+    def n_obstacles(self) -> int:
+        """Contact obstacles C (each segment has one slot per obstacle); 0 without contact."""
+        return 0 if self.contact is None else self.contact.n_obstacles
 
     def structure(self):
         """See :func:`socb_structure`."""
-        return socb_structure(self.network)
+        return socb_structure(self.network, self.n_obstacles)
 
     def frames(self, state: SOCBState):
         return _frames(state, self.network)
 
     def residual(self, state: SOCBState, control: Control, frames):
-        return socb_residual(state, self.network, control, frames, self.quad)
+        return socb_residual(state, self.network, control, frames, self.quad, self.contact)
+
+    def contact_geometry(self, state: SOCBState, control: Control | None = None):
+        """(contact points [S, C, 2] µm, gaps [S, C] µm, forces on the filament [S, C, 2] pN,
+        counted [S, C] bool) of the slots of ``state`` (2D contact models only); a slot is
+        not counted where its closest point is a node that another segment owns or that is
+        anchored on the obstacle (a probe tip on the probe face)."""
+        net = self.network
+        control = Control.make() if control is None else control
+        m = state.moments
+        junction_segment, _ = moment_transfer(state, net)
+        couple_segment, _ = nodal_couple_transfer(control.load_factor * net.couples, net)
+        m_start = m[net.segments[:, 0]] - junction_segment - couple_segment
+        _, _, _, _, points, gaps = contact_segment_rows(state.positions, state.directors, m, m_start, state.forces,
+                                                     state.contacts, net, self.contact, control, self.quad)
+        s = jnp.clip(state.contacts[..., 0], 0.0, 1.0)
+        counted = (jnp.where(s >= 1.0, self.contact.owns_end, 1.0) * jnp.where(s <= 0.0, self.contact.owns_start, 1.0)) > 0
+        return points, gaps, state.contacts[..., 1:3], counted
+
+    def step_admissible(self, old: SOCBState, new: SOCBState) -> Array:
+        """False when a path step may have carried a segment through a sphere or point
+        obstacle (a plane cannot be crossed unseen: the gap turns negative).  Each curve point
+        of a segment moves by at most D = max |Δr| at its nodes + l · max |Δθ| along it (taken
+        as 1.5 × the larger nodal turn); a segment whose axis was φ from a sphere's surface
+        cannot reach it if D < φ."""
+        if self.contact is None or "sphere" not in self.contact.kinds:
+            return jnp.asarray(True)
+        net = self.network
+        a, b = net.segments[:, 0], net.segments[:, 1]
+        moved = jnp.linalg.norm(new.positions - old.positions, axis=-1)
+        turned = jnp.abs(new.directors - old.directors)
+        turned = 1.5 * jnp.maximum(turned[a], turned[b])  # the turn inside a segment, with a margin
+        reach = jnp.maximum(moved[a], moved[b]) + net.lengths * turned  # [S]
+        _, gaps, _, _ = self.contact_geometry(old)
+        spheres = np.array([k == "sphere" for k in self.contact.kinds])
+        phi = gaps[:, spheres] + self.contact.filament_radius
+        return jnp.all(reach[:, None] < phi)
+
+    def contact_ends(self, state: SOCBState):
+        """(internal force at each segment's end [S, d] pN, extra nodal loads [N, d] pN): the
+        state's (start) forces less the segments' interior contact forces, and the loads that
+        lumped contact (comparison only) puts on start nodes; (forces, 0) without contact."""
+        zero = jnp.zeros_like(state.positions)
+        if not self.n_obstacles:
+            return state.forces, zero
+        F = state.contacts[..., 1:3]
+        if not self.contact.lumped:
+            return state.forces - jnp.sum(F, axis=1), zero
+        s = jnp.clip(state.contacts[..., :1], 0.0, 1.0)
+        start = jax.ops.segment_sum(jnp.sum((1.0 - s) * F, axis=1), self.network.segments[:, 0],
+                                    num_segments=self.network.n_nodes)
+        return state.forces - jnp.sum(s * F, axis=1), start
 
     def tangents(self, state: SOCBState) -> Array:
         return state_tangents(state.directors, self.network.dim)

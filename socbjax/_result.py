@@ -68,6 +68,12 @@ class CompressionResult(eqx.Module):
     end_nodes : [E] supported non-probe nodes (strand ends on the surface).
     end_forces : [K, E] axial force on each strand end (pN, compressive positive).
     iterations : [K] Newton iterations of each step.
+    contact_count : [K] int, contacts carrying force (0 without contact).
+    min_gap : [K] smallest surface-to-surface gap between a filament and an obstacle (µm;
+        negative = penetration; NaN without contact).
+    contact_force : [K] sum of the contact force magnitudes (pN; 0 without contact).
+    contact_points, contact_forces : [K, c, d] the c = S·C contact slots' points (µm) and
+        forces on the filament (pN; zero where not in contact); c = 0 without contact.
     result : :class:`socbjax.RESULTS` item of the whole protocol (successful: every phase
         completed and, when sampled, every sample converged).
     network : the compressed network, its ``loads`` the applied ones (perturbation included).
@@ -90,6 +96,11 @@ class CompressionResult(eqx.Module):
     iterations: Array
     result: RESULTS
     network: Network
+    contact_count: Array | None = None
+    min_gap: Array | None = None
+    contact_force: Array | None = None
+    contact_points: Array | None = None
+    contact_forces: Array | None = None
     limit_points: tuple = eqx.field(static=True, default=())
     parameters_json: str = eqx.field(static=True, default="{}")
 
@@ -149,7 +160,8 @@ class CompressionResult(eqx.Module):
         reactions = jnp.einsum("nij,nj->ni", jnp.asarray(net.position_projector), net_nodal_force(forces, net, net.loads))
         row = RESULTS.where(jnp.asarray(self.converged)[i], RESULTS.successful, RESULTS.not_reached)
         twists = self.twists[i] if net.twisting else jnp.zeros(0)
-        state = SOCBState(positions=positions, directors=directors, moments=moments, forces=forces, twists=twists)
+        state = SOCBState(positions=positions, directors=directors, moments=moments, forces=forces, twists=twists,
+                          contacts=jnp.zeros((net.n_segments, 0, 5)))
         zero = jnp.zeros((), jnp.int32)
         return Solution(positions=positions, tangents=tangents, angles=angles, moments=moments, curvatures=curvatures,
                         segment_forces=forces, reactions=reactions, result=row, iterations=jnp.asarray(self.iterations)[i],

@@ -168,7 +168,7 @@ def _sampled(model, displacement, at, unload, settings, inner):
     stable = (rec.SA == sign_ref) & (rec.SB == sign_ref)
     result = RESULTS.where((result == RESULTS.successful) & ~jnp.all(converged),
                            RESULTS.where(jnp.all(rec.hit), RESULTS.max_iterations, RESULTS.not_reached), result)
-    observed = observe(model, X, model.network.loads)
+    observed = observe(model, X, model.network.loads, U)
     return U, X, iterations, converged, stable, result, observed, u0
 
 
@@ -199,7 +199,8 @@ def compress_at(model, displacement, at=None, *, unload=False, perturbation=None
     inner = linear_solver_for(loaded, settings.linear_solver)
     U, X, iterations, converged, stable, result, observed, u0 = _sampled(loaded, displacement, at, bool(unload),
                                                                         settings.traced(), inner)
-    positions, tangents, moments, forces, probe_force, axial, twists = observed
+    positions, tangents, moments, forces, probe_force, axial, twists = observed[:7]
+    count, min_gap, contact_force, contact_points, contact_forces = observed[7:]
     crossed = jnp.any(surface_crossing(net, positions, U) & converged)
     result = RESULTS.where((result == RESULTS.successful) & crossed, RESULTS.surface_crossed, result)
     M = at.shape[0]
@@ -216,7 +217,8 @@ def compress_at(model, displacement, at=None, *, unload=False, perturbation=None
         displacement=U, force=probe_force, converged=converged, stable=stable,
         phase=np.repeat(np.array([1, 2], np.int8)[: 2 if unload else 1], M), positions=positions, tangents=tangents,
         moments=moments, segment_forces=forces, twists=twists, end_nodes=ends, end_forces=axial[:, ends],
-        iterations=iterations,
+        iterations=iterations, contact_count=count, min_gap=min_gap, contact_force=contact_force,
+        contact_points=contact_points, contact_forces=contact_forces,
         result=result, network=loaded.network, limit_points=(), parameters_json=parameters_json(params))
     if not throw:
         return out

@@ -23,6 +23,8 @@ from jax.flatten_util import ravel_pytree
 
 from ._adjoint import ImplicitAdjoint
 from ._checks import check_array, check_bool, check_int, check_real, describe
+from ._contact import Contact
+from ._contact_model import contact_setup
 from ._equilibrium import Solution, node_angles_and_curvatures
 from ._jointed import JointedModel
 from ._network import Network, is_traced
@@ -46,15 +48,18 @@ __all__ = ["solve", "default_atol", "make_model", "nodal_forces", "nodal_couples
 MODELS = ("socb", "jointed")
 
 
-def make_model(network: Network, model: str = "socb", *, quadrature_order: int = 8):
-    """The discretisation of ``network``: "socb" (:class:`SOCBModel`) or "jointed"."""
+def make_model(network: Network, model: str = "socb", *, quadrature_order: int = 8, contact: Contact | None = None):
+    """The discretisation of ``network``: "socb" (:class:`SOCBModel`, with ``contact``: a
+    :class:`socbjax.Contact` or None) or "jointed" (no contact)."""
     if not isinstance(network, Network):
         raise TypeError(f"network must be a socbjax Network (e.g. socbjax.cantilever(...)), got {type(network).__name__}")
     if not isinstance(model, str):
         raise TypeError(f"model must be one of {MODELS} (a string), got {describe(model)}")
     quadrature_order = check_int("quadrature_order", quadrature_order, minimum=2, maximum=MAX_QUADRATURE_ORDER)
     if model == "socb":
-        return SOCBModel(network, get_quadrature(quadrature_order))
+        return SOCBModel(network, get_quadrature(quadrature_order), contact_setup(network, contact))
+    if contact is not None:
+        raise ValueError(f"contact is built for model='socb' only, got model={model!r} with contact")
     if model == "jointed":
         if network.n_junctions or network.has_probe:
             raise ValueError("the jointed baseline supports single filaments only (no branch junctions or probe); "
@@ -171,7 +176,8 @@ def _package(model, x, stats, state0) -> Solution:
     angles, curvatures = node_angles_and_curvatures(net, tangents, moments)
     if net.dim == 2 and isinstance(model, SOCBModel):
         angles = state.directors  # the unknowns themselves: unwrapped beyond ±π where the filament turns
-    reactions = net_nodal_force(state.forces, net, load_factor * net.loads)  # the force the support applies
+    end_forces, contact_loads = model.contact_ends(state) if isinstance(model, SOCBModel) else (None, 0.0)
+    reactions = net_nodal_force(state.forces, net, load_factor * net.loads + contact_loads, end_forces)  # support force
     reactions = jnp.einsum("nij,nj->ni", jnp.asarray(net.position_projector), reactions)
     return Solution(positions=state.positions, tangents=tangents, angles=angles, moments=moments, curvatures=curvatures,
                     segment_forces=state.forces, reactions=reactions, result=result, iterations=iterations, steps=steps,
@@ -197,7 +203,8 @@ def _settings(settings, network) -> PathSettings:
 
 
 def solve(network: Network, forces=None, couples=None, *, model: str = "socb", settings: PathSettings | None = None,
-          initial_state=None, adjoint: ImplicitAdjoint = ImplicitAdjoint(), throw: bool = True) -> Solution:
+          initial_state=None, adjoint: ImplicitAdjoint = ImplicitAdjoint(), throw: bool = True,
+          contact: Contact | None = None) -> Solution:
     """Static equilibrium of ``network`` under fixed-direction nodal ``forces`` and ``couples``.
 
     Parameters
@@ -220,6 +227,8 @@ def solve(network: Network, forces=None, couples=None, *, model: str = "socb", s
     throw : raise :class:`socbjax.ConvergenceError` (an ``equinox`` runtime error under
         ``jax.jit``) if the full load is not reached (default); with ``throw=False`` check
         ``Solution.result`` / ``Solution.converged``.
+    contact : None (no contact, the default) or a :class:`socbjax.Contact`: rigid frictionless
+        planes and spheres that the filament's smooth curve may not cross (2D networks).
 
     Returns a :class:`socbjax.Solution` (an ``eqx.Module``: ``jax.jit`` can return it).
     """
@@ -231,7 +240,7 @@ def solve(network: Network, forces=None, couples=None, *, model: str = "socb", s
     settings = _settings(settings, network)
     loaded = network.replace(loads=network.loads + nodal_forces(network, forces),
                              couples=network.couples + nodal_couples(network, couples))
-    disc = make_model(loaded, model, quadrature_order=settings.quadrature_order)
+    disc = make_model(loaded, model, quadrature_order=settings.quadrature_order, contact=contact)
     inner = linear_solver_for(disc, settings.linear_solver)
     if initial_state is not None and (jax.tree_util.tree_structure(initial_state)
                                       != jax.tree_util.tree_structure(disc.initial_state())):

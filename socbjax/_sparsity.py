@@ -68,7 +68,11 @@ def template_model(model):
         d = net.dim
         half = jnp.broadcast_to(0.5 * jnp.eye(d), (net.n_nodes, d, d))
         net = eqx.tree_at(lambda n: n.padding, net, Padding(projector=half, active=jnp.ones(net.n_nodes)))
-    return type(model)(net, *[getattr(model, f) for f in ("quad",) if hasattr(model, f)])
+    fields = [getattr(model, f) for f in ("quad",) if hasattr(model, f)]
+    contact = getattr(model, "contact", None)
+    if contact is not None:  # every contact dependence switched on (no projection, no ownership)
+        return type(model)(net, *fields, contact=eqx.tree_at(lambda c: c.dense, contact, True))
+    return type(model)(net, *fields)
 
 
 def _residual_fn(template):
@@ -105,7 +109,9 @@ def _refined(template, x0, fn) -> ColouredSparseLU:
 
 def prepare_sparse_solver(model) -> ColouredSparseLU:
     """The :class:`ColouredSparseLU` for ``model``'s Jacobian (cached per topology)."""
-    key = (model.network.topology, model.network.padding is not None, type(model).__name__, getattr(model, "quad", None))
+    contact = getattr(model, "contact", None)
+    key = (model.network.topology, model.network.padding is not None, type(model).__name__, getattr(model, "quad", None),
+           None if contact is None else (contact.kinds, contact.lumped))
     if key in _PREPARED:
         return _PREPARED[key]
     # Host-side set-up from random template values, also when called while the user's

@@ -1,0 +1,158 @@
+"""Contact with rigid frictionless obstacles: :class:`Plane`, :class:`Sphere` and the
+settings :class:`Contact` (``solve(..., contact=...)``, ``compress(..., contact=...)``).
+
+Units: µm, pN.  A filament of diameter d touches an obstacle when the signed distance φ of
+its axis from the obstacle's surface reaches d/2; the *gap* is g = φ − d/2 (µm, negative =
+penetration).  Each (segment, obstacle) pair carries one contact slot: the closest point of
+the segment's smooth SOCB curve to the obstacle (not a node: with 0.25–0.5 µm segments most
+contacts fall between nodes), where the contact force acts as an interior point force,
+carried exactly by the segment equations (:mod:`socbjax._contact_segment`,
+``docs/equations.md`` "Contact").
+
+Contact law: a C² penalty on the gap (frictionless, along the obstacle's normal at the
+contact point),
+
+    f(g) = (k δ / 3) (1 − g/δ)³  for g < δ,   f(g) = 0  for g ≥ δ,
+
+with activation distance δ (µm) and stiffness k = −f'(0) (pN/µm).  f, f' and f'' vanish at
+g = δ, so the residual is C² and Newton, continuation and implicit derivatives see a smooth
+problem.  Penetration bound: f is decreasing, so a contact that carries the force F sits at
+g = δ (1 − (3F/(kδ))^{1/3}); it penetrates by less than p·d exactly when
+F < (kδ/3)(1 + p d/δ)³.  The defaults (δ = d/10, k from :attr:`Contact.force_limit`) keep
+the penetration below 1 % of d up to that force; ``CompressionResult.min_gap`` reports the
+actual gap of every step.
+"""
+
+from __future__ import annotations
+
+import equinox as eqx
+import jax.numpy as jnp
+import numpy as np
+
+from ._checks import check_array, check_bool, check_real, describe
+
+__all__ = ["Plane", "Sphere", "Contact", "DEFAULT_DIAMETER", "penalty_force"]
+
+DEFAULT_DIAMETER = 0.007  # µm: an actin filament (7 nm)
+
+
+def _point(name: str, value, dim: int | None = None) -> np.ndarray:
+    v = check_array(name, value, "µm")
+    if not isinstance(v, np.ndarray):
+        raise TypeError(f"{name} must be concrete numbers (µm); obstacles fix the contact set-up, got a traced value")
+    v = v.ravel()
+    if v.shape not in ((2,), (3,)) or (dim is not None and v.shape != (dim,)):
+        want = f"{dim}" if dim is not None else "2 or 3"
+        raise ValueError(f"{name} must have {want} components (x, y[, z]), got {describe(value)}")
+    return v
+
+
+class Plane(eqx.Module):
+    """A rigid frictionless plane through ``point`` (µm, [d]) with unit ``normal`` ([d],
+    normalised here) pointing to the allowed side: filament axes stay at distance ≥ d/2 on
+    that side.  In 2D a plane is a line."""
+
+    point: np.ndarray
+    normal: np.ndarray
+
+    def __init__(self, point, normal):
+        p = _point("Plane point", point)
+        n = _point("Plane normal", normal, p.size)
+        length = float(np.linalg.norm(n))
+        if length < 1e-12:
+            raise ValueError(f"Plane normal must be a non-zero vector (it points to the allowed side), got {n.tolist()}")
+        self.point, self.normal = p, n / length
+
+    @property
+    def dim(self) -> int:
+        return int(self.point.size)
+
+
+class Sphere(eqx.Module):
+    """A rigid frictionless sphere (a disc in 2D) of ``radius`` µm around ``center`` (µm,
+    [d]); ``radius=0`` is a point obstacle.  Filament axes stay at distance ≥ radius + d/2
+    from the center."""
+
+    center: np.ndarray
+    radius: float
+
+    def __init__(self, center, radius=0.0):
+        self.center = _point("Sphere center", center)
+        self.radius = check_real("Sphere radius", radius, "µm", low=0.0, low_open=False, traced_ok=False)
+
+    @property
+    def dim(self) -> int:
+        return int(self.center.size)
+
+
+def _obstacles(name: str, value, kind) -> tuple:
+    if value is None:
+        return ()
+    if isinstance(value, kind):
+        return (value,)
+    if not isinstance(value, (tuple, list)) or not all(isinstance(v, kind) for v in value):
+        raise TypeError(f"{name} must be a tuple of socbjax.{kind.__name__} (e.g. {name}=(socbjax.{kind.__name__}"
+                        f"(...),)), got {describe(value)}")
+    return tuple(value)
+
+
+class Contact(eqx.Module):
+    """Contact settings (frictionless; see the module docstring for the law).
+
+    diameter : filament diameter d (µm; default 0.007, actin).
+    planes : extra rigid planes (:class:`Plane`), e.g. the walls of a channel.
+    obstacles : rigid spheres / point obstacles (:class:`Sphere`).
+    self_contact : contact between non-adjacent pieces of filament.  Not built yet (see
+        ``docs/equations.md`` "Contact"): solving with ``self_contact=True`` raises
+        ``NotImplementedError``; pass ``self_contact=False`` for obstacle contact.
+    surfaces : add the probe face (moving with the probe) and the substrate (the plane of the
+        farthest opposing support) for networks with a probe.
+    activation : δ (µm) at which the contact force starts; default d/10.
+    stiffness : k = −f'(0) (pN/µm); default: the value that keeps the penetration below 1 % of
+        d up to ``force_limit``.
+    force_limit : the contact force (pN) up to which the default stiffness keeps the
+        penetration below 1 % of d; default 0.1 EI/d² (mean EI): a force that bends the
+        filament on the scale of its own diameter, beyond the rod model (actin: 84 pN).  It
+        depends on the material, not on the discretisation: refining the nodes keeps the law.
+    lumped : for comparison only: put each contact force on the segment's two nodes
+        ((1 − σ)F and σF) instead of carrying it at its point (what node-based codes do; see
+        ``docs/equations.md`` "Contact" for how much worse it is).
+    """
+
+    diameter: float = DEFAULT_DIAMETER
+    planes: tuple = ()
+    obstacles: tuple = ()
+    self_contact: bool = True
+    surfaces: bool = True
+    activation: float | None = None
+    stiffness: float | None = None
+    force_limit: float | None = None
+    lumped: bool = False
+
+    def __init__(self, diameter=DEFAULT_DIAMETER, planes=(), self_contact=True, surfaces=True, *, obstacles=(),
+                 activation=None, stiffness=None, force_limit=None, lumped=False):
+        self.diameter = check_real("Contact diameter", diameter, "µm", low=0.0, traced_ok=False)
+        self.planes = _obstacles("planes", planes, Plane)
+        self.obstacles = _obstacles("obstacles", obstacles, Sphere)
+        self.self_contact = check_bool("self_contact", self_contact)
+        self.surfaces = check_bool("surfaces", surfaces)
+        opt = lambda name, v, unit: None if v is None else check_real(name, v, unit, low=0.0, traced_ok=False)  # noqa: E731
+        self.activation = opt("activation", activation, "µm")
+        self.stiffness = opt("stiffness", stiffness, "pN/µm")
+        self.force_limit = opt("force_limit", force_limit, "pN")
+        self.lumped = check_bool("lumped", lumped)
+
+    def law(self, EI_mean) -> tuple:
+        """(δ µm, k pN/µm) of this contact for a network of mean EI (pN·µm²): the defaults of
+        the class docstring where not given."""
+        delta = self.diameter / 10 if self.activation is None else self.activation
+        if self.stiffness is not None:
+            return delta, self.stiffness
+        force = 0.1 * EI_mean / self.diameter**2 if self.force_limit is None else self.force_limit
+        return delta, 3.0 * force / (delta * (1.0 + 0.01 * self.diameter / delta) ** 3)
+
+
+def penalty_force(gap, activation, stiffness):
+    """f(g) = (k δ/3)(1 − g/δ)³ for g < δ, else 0 (pN): the C² contact law (gap µm)."""
+    x = jnp.maximum(1.0 - gap / activation, 0.0)
+    return stiffness * activation / 3.0 * x**3

@@ -1,0 +1,263 @@
+"""A planar SOCB segment that carries interior point forces exactly, and its contact slots.
+
+A point force F at s_k inside a segment makes the internal force piecewise constant,
+n(s) = n_a − Σ_{s_j < s} F_j, so θ'' = −(t × n)/EI jumps at s_k, and so do θ''', θ⁗ and
+θ⁽⁵⁾ (their closed forms in θ, θ' and n are in ``docs/equations.md`` "Contact").  The
+segment's angle is the quintic of Eqs 5–6a plus the known jumps,
+
+    θ(s) = q(s) + Σ_k Σ_{j=2}^{5} J_kj/j! (s − s_k)₊^j ,
+
+so the remainder q is as smooth as a load-free segment's angle and the quintic keeps its
+sixth order.  Eqs 7–9 integrate over the pieces between the s_k (composite Gauss–Legendre),
+with the moment arms of the interior forces:
+
+* Eq. 7:  r_b − r_a = ∫ t ds;
+* Eq. 8:  m_b − m_a + (r_b − r_a) × n_a − Σ_k (r_b − r_k) × F_k = 0;
+* Eq. 9:  EI(θ_b − θ_a − κ₀ l) = m_a l − [∫ (l − s) t ds] × n_a + Σ_k [∫_{s_k}^l (l − s) t ds] × F_k;
+* end jets θ''(0) = −(t_a × n_a)/EI, θ''(l) = −(t_b × n_b)/EI with n_b = n_a − Σ F_k.
+
+Each contact slot k (one per segment and obstacle) has five unknowns: σ_k = s_k/l, the
+contact force F_k on the filament (pN, 2 components), and θ_k, κ_k (the angle and curvature
+at s_k, on which the jumps depend), with five rows: σ_k at the closest point of the curve to
+the obstacle (projected onto [0, 1]), F_k = f(gap) ∇φ (the penalty law of
+:mod:`socbjax._contact` along the obstacle's unit normal at the contact point),
+θ_k = θ(s_k) and κ_k = θ'(s_k).  With the force and the curve's data as unknowns every row
+is an explicit function of the state: no inner iteration.
+"""
+
+from __future__ import annotations
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from ._contact import penalty_force
+from ._quadrature import coupling_matrix
+
+__all__ = ["ContactSetup", "SLOT_WIDTH", "planar_contact_segment", "segment_jumps", "contact_segment_rows", "initial_slots"]
+
+_MINV = np.linalg.inv(coupling_matrix(1.0))  # Hermite data (σ-units) -> monomial coefficients
+_POW = np.arange(6)
+_JUMP_ORDERS = np.arange(2, 6)
+_FACT = np.array([2.0, 6.0, 24.0, 120.0])
+# The location row projects σ − (∇φ·t) onto [0, 1]; far from contact a bias of this size
+# toward the segment's middle keeps the row regular where φ is flat along the segment (a
+# straight segment parallel to a wall).  It fades as (gap/l)², so it is 0 in contact.
+_LOCATION_BIAS = 0.05
+SLOT_WIDTH = 5  # unknowns per 2D slot: σ, F_x, F_y, θ, κ
+
+
+class ContactSetup(eqx.Module):
+    """The obstacles of a model, per (segment, obstacle) slot (internal; built by
+    :func:`socbjax._contact_model.contact_setup`).  C obstacles, S segments."""
+
+    kinds: tuple = eqx.field(static=True)  # "plane" | "sphere" per obstacle
+    points: jax.Array  # [C, d] plane point or sphere center (µm), at zero probe displacement
+    normals: jax.Array  # [C, d] plane unit normal (allowed side); zeros for spheres
+    radii: jax.Array  # [C] sphere radius (µm); 0 for planes
+    moving: jax.Array  # [C] 1 for the probe face (moves with the probe displacement)
+    owns_start: jax.Array  # [S, C] 1 where the segment's σ = 0 point is its own (see residual)
+    owns_end: jax.Array  # [S, C] 1 where the segment's σ = 1 point is its own
+    filament_radius: jax.Array  # d/2 (µm)
+    activation: jax.Array  # δ (µm)
+    stiffness: jax.Array  # k (pN/µm)
+    force_scale: jax.Array  # pN, to make the λ rows dimensionless
+    dense: bool = eqx.field(static=True, default=False)  # template: every dependence switched on
+    lumped: bool = eqx.field(static=True, default=False)  # forces lumped to nodes (comparison only)
+
+    @property
+    def n_obstacles(self) -> int:
+        return len(self.kinds)
+
+
+def _derivatives(theta, kappa, n, EI):
+    """(θ'', θ''', θ⁗, θ⁽⁵⁾) of a piece under the constant internal force n (pN), at a point
+    with angle θ and curvature κ = θ' (1/µm)."""
+    c = jnp.cos(theta) * n[1] - jnp.sin(theta) * n[0]  # t × n
+    d = jnp.cos(theta) * n[0] + jnp.sin(theta) * n[1]  # t · n
+    d2 = -c / EI
+    d3 = kappa * d / EI
+    d4 = (d2 * d + kappa**2 * c) / EI
+    d5 = (d3 * d + 3.0 * kappa * d2 * c - kappa**3 * d) / EI
+    return jnp.stack([d2, d3, d4, d5])
+
+
+def segment_jumps(sigma, theta, kappa, forces, n_a, length, EI):
+    """Jump coefficients a[k, j] = l^j J_kj / j! (σ-units) of the slots: J_kj is the jump of
+    the j-th derivative of θ (j = 2..5) across the point force forces[k] at σ_k; the force
+    before σ_k is n_a minus the forces of the slots that come earlier (ties by index)."""
+    C = sigma.shape[0]
+    idx = jnp.arange(C)
+    before = (sigma[None, :] < sigma[:, None]) | ((sigma[None, :] == sigma[:, None]) & (idx[None, :] < idx[:, None]))
+    n_minus = n_a[None, :] - before.astype(forces.dtype) @ forces  # [C, 2]
+    n_plus = n_minus - forces
+    jump = jax.vmap(lambda th, ka, nm, npl: _derivatives(th, ka, npl, EI) - _derivatives(th, ka, nm, EI))(
+        theta, kappa, n_minus, n_plus)  # [C, 4]
+    return jump * length ** _JUMP_ORDERS / _FACT
+
+
+def _corrections(x, sigma, a):
+    """(C, dC/dσ, d²C/dσ²) at the points x [P] of Σ_k Σ_j a_kj (σ − σ_k)₊^j."""
+    z = jnp.maximum(x[:, None] - sigma[None, :], 0.0)[..., None]  # [P, C, 1]
+    j = _JUMP_ORDERS
+    value = jnp.sum(a * z**j, axis=(1, 2))
+    first = jnp.sum(a * j * z ** (j - 1), axis=(1, 2))
+    second = jnp.sum(a * j * (j - 1) * z ** (j - 2), axis=(1, 2))
+    return value, first, second
+
+
+def _angle(x, coef, sigma, a):
+    """(θ, dθ/dσ) at the points x [P] of the corrected quintic."""
+    mono = x[:, None] ** _POW
+    dmono = _POW * x[:, None] ** np.maximum(_POW - 1, 0)
+    value, first, _ = _corrections(x, sigma, a)
+    return mono @ coef + value, dmono @ coef + first
+
+
+def _signed_distance(setup: ContactSetup, k: int, r, displacement, axis):
+    """(φ µm, unit ∇φ) of obstacle k at the point r: distance of the axis from its surface."""
+    point = setup.points[k] + setup.moving[k] * displacement * axis
+    if setup.kinds[k] == "plane":
+        return jnp.dot(r - point, setup.normals[k]), setup.normals[k]
+    offset = r - point
+    dist = jnp.sqrt(jnp.sum(offset**2) + 1e-300)
+    return dist - setup.radii[k], offset / dist
+
+
+def planar_contact_segment(ends, n_a, length, EI, kappa0, slots, owns_start, owns_end, setup: ContactSetup,
+                           displacement, axis, quad):
+    """One planar segment with its contact slots.
+
+    ends : (r_a [2], θ_a, m_a, r_b [2], θ_b, m_b): positions µm, angles rad, moments pN·µm
+        (m_a already reduced by the moments handed over at the start node);
+    n_a : internal force at the start (pN, the state's segment force);
+    slots : [C, 5] (σ, F_x, F_y pN, θ rad, κ 1/µm): location, contact force on the filament,
+        angle and curvature there; owns_start, owns_end : [C] (1: the σ = 0 / σ = 1 point
+        belongs to this segment; a node counts once, and a node anchored on an obstacle —
+        a probe tip on the probe face, a base on the substrate — never);
+    displacement, axis : probe displacement (µm) and direction, for the moving probe face.
+    Returns (segment rows [4] as :func:`socbjax._segment.planar_segment_residual`, slot rows
+    [C, 5], end force n_b [2] (pN), the force [2] (pN) lumped onto the start node (zero
+    unless ``setup.lumped``), contact points [C, 2] (µm), gaps [C] (µm)).
+    """
+    r_a, theta_a, m_a, r_b, theta_b, m_b = ends
+    sigma, F, theta_k, kappa_k = slots[:, 0], slots[:, 1:3], slots[:, 3], slots[:, 4]
+    s = jnp.clip(sigma, 0.0, 1.0)
+    turn = jnp.arctan2(jnp.sin(theta_b - theta_a), jnp.cos(theta_b - theta_a))
+    F_node = F
+    if setup.lumped:  # comparison only: the force goes to the two nodes, the segment never sees it
+        F_node, F = F * s[:, None], jnp.zeros_like(F)
+    a = segment_jumps(s, theta_k, kappa_k, F, n_a, length, EI)
+    n_b = n_a - jnp.sum(F, axis=0)
+    end_c, end_d1, end_d2 = _corrections(jnp.ones(1), s, a)
+    data = jnp.stack([theta_a, length * (m_a / EI + kappa0), -length**2 * _cross(theta_a, n_a) / EI,
+                      theta_a + turn - end_c[0], length * (m_b / EI + kappa0) - end_d1[0],
+                      -length**2 * _cross(theta_a + turn, n_b) / EI - end_d2[0]])
+    coef = jnp.asarray(_MINV) @ data
+    # composite Gauss–Legendre between the sorted slot points (θ'' jumps there)
+    breaks = jnp.concatenate([jnp.zeros(1), jnp.sort(s), jnp.ones(1)])
+    widths = jnp.diff(breaks)
+    x = (breaks[:-1, None] + widths[:, None] * jnp.asarray(quad.points)[None, :]).ravel()
+    W = (widths[:, None] * jnp.asarray(quad.weights)[None, :]).ravel()
+    theta, _ = _angle(x, coef, s, a)
+    t = jnp.stack([jnp.cos(theta), jnp.sin(theta)], axis=-1)
+    after = (x[None, :] > s[:, None]).astype(x.dtype)  # [C, P]
+    chord = r_b - r_a
+    to_end = length * (after * W) @ t  # r_b − r_k  [C, 2]
+    tail = length**2 * (after * W * (1.0 - x)) @ t  # ∫_{s_k}^l (l − s) t ds  [C, 2]
+    lever = length**2 * ((W * (1.0 - x)) @ t)
+    length_eq = (chord - length * (W @ t)) / length
+    moment_eq = (m_b - m_a + _cross2(chord, n_a) - jnp.sum(_cross2(to_end, F))) * length / EI
+    bending_eq = (EI * (turn - kappa0 * length) - (m_a * length - _cross2(lever, n_a) + jnp.sum(_cross2(tail, F)))) / EI
+    seg_rows = jnp.concatenate([length_eq, moment_eq[None], bending_eq[None]])
+    points = r_a + length * ((1.0 - after) * W) @ t  # r_k
+    slot_rows, gaps = _slot_rows((r_a, r_b), points, s, sigma, slots[:, 1:3], theta_k, kappa_k, coef, a, length, owns_start, owns_end,
+                                 setup, displacement, axis)
+    start_load = jnp.sum(slots[:, 1:3] - F_node, axis=0) if setup.lumped else jnp.zeros(2)
+    return seg_rows, slot_rows, n_a - jnp.sum(F_node, axis=0), start_load, points, gaps
+
+
+def _cross(theta, n):
+    return jnp.cos(theta) * n[1] - jnp.sin(theta) * n[0]
+
+
+def _cross2(u, v):
+    return u[..., 0] * v[..., 1] - u[..., 1] * v[..., 0]
+
+
+def _slot_rows(ends, points, s, sigma, F, theta_k, kappa_k, coef, a, length, owns_start, owns_end, setup, displacement,
+               axis):
+    """Rows [C, 5] of the slots (dimensionless) and their gaps [C] (µm)."""
+    if setup.n_obstacles == 0:
+        return jnp.zeros((0, SLOT_WIDTH)), jnp.zeros(0)
+    theta_at, dtheta_at = _angle(s, coef, s, a)
+    phi, grad = [], []
+    for k in range(setup.n_obstacles):  # a handful of obstacles: unrolled
+        p, g = _signed_distance(setup, k, points[k], displacement, axis)
+        phi.append(p)
+        grad.append(g)
+    phi, grad = jnp.stack(phi), jnp.stack(grad)
+    gaps = phi - setup.filament_radius
+    tangent = jnp.stack([jnp.cos(theta_k), jnp.sin(theta_k)], axis=-1)
+    normal = jnp.stack([-jnp.sin(theta_k), jnp.cos(theta_k)], axis=-1)
+    slope = jnp.sum(grad * tangent, axis=-1)  # dφ/ds at the slot (dimensionless)
+    # d²φ/ds² = κ ∇φ·n + t·Hφ·t (a sphere's Hessian: (1 − (∇φ·t)²)/distance): a stationary
+    # point with d²φ/ds² ≤ 0 is a maximum (a segment bulging away), and the closest point is
+    # then the nearer end, which the row selects instead
+    sphere = jnp.asarray([k == "sphere" for k in setup.kinds])
+    radial = jnp.maximum(phi + setup.radii, 1e-300)
+    bend = kappa_k * jnp.sum(grad * normal, axis=-1) + jnp.where(sphere, (1.0 - slope**2) / radial, 0.0)
+    end_phi = [[_signed_distance(setup, k, r, displacement, axis)[0] for k in range(setup.n_obstacles)] for r in ends]
+    nearer = jnp.where(jnp.stack(end_phi[0]) <= jnp.stack(end_phi[1]), 0.0, 1.0)
+    bias = _LOCATION_BIAS * jnp.clip(gaps / length, 0.0, 1.0) ** 2 * (sigma - 0.5)
+    if setup.dense:  # pattern template: no projection, no ownership, force everywhere
+        location = slope + bias
+        magnitude = setup.stiffness * gaps * (1.0 + gaps)
+    else:
+        closest = jnp.where(bend * length > 0, sigma - jnp.clip(sigma - slope - bias, 0.0, 1.0), sigma - nearer)
+        # far from a plane the slot rests at the segment's middle (its force is 0 there
+        # anyway): the closest-point rule, whose choice of branch may jump while a segment is
+        # straight and parallel to the plane, takes over smoothly inside the band
+        # gap < max(10 δ, l/20).  A sphere's distance is curved along any segment (d²φ/ds² > 0
+        # near it): its rule holds everywhere (a band there moves the slot along a fold).
+        band = jnp.maximum(10.0 * setup.activation, 0.05 * length)
+        x = jnp.clip(2.0 * (band - gaps) / band, 0.0, 1.0)
+        near = jnp.where(sphere, 1.0, x * x * (3.0 - 2.0 * x))
+        location = near * closest + (1.0 - near) * (sigma - 0.5)
+        owned = jnp.where(s >= 1.0, owns_end, 1.0) * jnp.where(s <= 0.0, owns_start, 1.0)
+        magnitude = owned * penalty_force(gaps, setup.activation, setup.stiffness)
+    force = (F - magnitude[:, None] * grad) / setup.force_scale
+    rows = jnp.concatenate([location[:, None], force, (theta_k - theta_at)[:, None],
+                            (length * kappa_k - dtheta_at)[:, None]], axis=1)
+    return rows, gaps
+
+
+def contact_segment_rows(positions, angles, moments, m_start, forces, slots, network, setup: ContactSetup, control,
+                         quad):
+    """All planar segments with their slots (vmapped): (segment rows [S, 4], slot rows
+    [S, C, 5], end forces n_b [S, 2] pN, start-node loads [S, 2] pN, contact points [S, C, 2]
+    µm, gaps [S, C] µm)."""
+    a, b = network.segments[:, 0], network.segments[:, 1]
+    ends = (positions[a], angles[a], m_start, positions[b], angles[b], moments[b])
+    axis = jnp.asarray(network.probe_direction, positions.dtype)
+
+    def one(end, n, length, EI, kappa0, slot, own_a, own_b):
+        return planar_contact_segment(end, n, length, EI, kappa0, slot, own_a, own_b, setup, control.displacement,
+                                      axis, quad)
+
+    return jax.vmap(one)(ends, forces, network.lengths, network.EI, network.natural_curvature, slots,
+                         setup.owns_start, setup.owns_end)
+
+
+def initial_slots(network, setup: ContactSetup | None, angles) -> jax.Array:
+    """Slot unknowns [S, C, 5] of a force-free state: the segment middle (σ = ½), zero force,
+    the angle and curvature of the unloaded arc there; [S, 0, 5] without contact."""
+    C = 0 if setup is None else setup.n_obstacles
+    S = network.n_segments
+    if C == 0:
+        return jnp.zeros((S, 0, SLOT_WIDTH))
+    kappa0 = jnp.asarray(network.natural_curvature) if network.dim == 2 else jnp.zeros(S)
+    theta = angles[network.segments[:, 0]] + 0.5 * kappa0 * network.lengths
+    one = jnp.stack([jnp.full(S, 0.5), jnp.zeros(S), jnp.zeros(S), theta, kappa0], axis=1)
+    return jnp.broadcast_to(one[:, None, :], (S, C, SLOT_WIDTH))

@@ -1,0 +1,150 @@
+"""Contact with rigid obstacles (socbjax.Contact, Plane, Sphere): an interior point force
+carried exactly (against an independent shooting solution), the channel column against the
+elliptic-integral elastica, derivatives against finite differences, and the contract that
+contact=None keeps the contact-free model."""
+
+import numpy as np
+import pytest
+from scipy.integrate import solve_ivp
+from scipy.optimize import brentq, fsolve
+from scipy.special import ellipe, ellipk
+
+import jax
+import socbjax as sj
+
+L, EI, D = 1.0, 1.0, 0.01
+TIP = np.array([0.0, -3.0])  # pN, pushes the cantilever onto the obstacle
+OBSTACLE = np.array([0.6, -0.12])  # µm, a point obstacle below the cantilever
+
+
+def _obstacle_contact(**kw):
+    return sj.Contact(diameter=D, obstacles=(sj.Sphere(OBSTACLE, 0.0),), self_contact=False, surfaces=False, **kw)
+
+
+def _solve_on_obstacle(n_segments, EI=EI, **kw):
+    net = sj.cantilever(n_segments + 1, length=L, EI=EI, dim=2)
+    return sj.solve(net, forces={-1: TIP}, contact=_obstacle_contact(**kw))
+
+
+def _rhs(s, y, n):
+    theta, m = y[2], y[3]
+    return [np.cos(theta), np.sin(theta), m / EI, -(np.cos(theta) * n[1] - np.sin(theta) * n[0])]
+
+
+def _shooting(guess):
+    """Independent reference: the Kirchhoff elastica integrated (DOP853, rtol 1e-13) from the
+    clamp to the tip with the internal force jumping by the contact force at s_c, where the
+    axis is closest to the obstacle and the force follows the same law f(gap)."""
+    delta, k = _obstacle_contact().law(EI)
+    opts = dict(rtol=1e-13, atol=1e-14, method="DOP853")
+
+    def legs(z):
+        m0, sc, lam, phi = z
+        Fc = lam * np.array([np.cos(phi), np.sin(phi)])
+        a = solve_ivp(_rhs, (0, sc), [0, 0, 0, m0], args=(TIP + Fc,), **opts).y[:, -1]
+        return a, solve_ivp(_rhs, (sc, L), a, args=(TIP,), **opts).y[:, -1]
+
+    def equations(z):
+        a, b = legs(z)
+        r, t = a[:2], np.array([np.cos(a[2]), np.sin(a[2])])
+        gap = np.linalg.norm(r - OBSTACLE) - D / 2
+        return [b[3], (r - OBSTACLE) @ t, z[2] - k * delta / 3 * max(1 - gap / delta, 0) ** 3,
+                np.arctan2(*(r - OBSTACLE)[::-1]) - z[3]]
+
+    z, _, ok, msg = fsolve(equations, guess, xtol=1e-14, full_output=True)
+    assert ok in (1, 3) and np.abs(equations(z)).max() < 1e-11, msg  # 3: converged to round-off
+    return z, legs(z)[1]
+
+
+@pytest.fixture(scope="module")
+def reference():
+    sol = _solve_on_obstacle(4)
+    slots = np.asarray(sol.state.contacts)[:, 0]
+    j = int(np.argmax(np.linalg.norm(slots[:, 1:3], axis=1)))
+    guess = [float(sol.moments[0]), (j + slots[j, 0]) / 4, np.linalg.norm(slots[j, 1:3]),
+             np.arctan2(slots[j, 2], slots[j, 1])]
+    return _shooting(guess)
+
+
+def test_mid_segment_point_force_matches_shooting(reference):
+    (m0, sc, lam, phi), tip = reference
+    assert 0.05 < (sc * 4) % 1 < 0.95  # the contact lies inside a segment, not at a node
+    sol = _solve_on_obstacle(4)
+    assert np.abs(np.asarray(sol.positions[-1]) - tip[:2]).max() < 1e-6
+    assert abs(float(sol.angles[-1]) - tip[2]) < 1e-6
+    slots = np.asarray(sol.state.contacts)[:, 0]
+    j = int(np.argmax(np.linalg.norm(slots[:, 1:3], axis=1)))
+    assert abs((j + slots[j, 0]) / 4 - sc) < 1e-6
+    assert abs(np.linalg.norm(slots[j, 1:3]) - lam) < 1e-6 * lam
+    # global balance: clamp reaction + tip load + contact force = 0
+    np.testing.assert_allclose(np.asarray(sol.reactions[0]) + TIP + slots[j, 1:3], 0.0, atol=1e-8)
+
+
+def test_node_lumped_contact_is_much_worse(reference):
+    _, tip = reference
+    exact = np.abs(np.asarray(_solve_on_obstacle(4).positions[-1]) - tip[:2]).max()
+    lumped = np.abs(np.asarray(_solve_on_obstacle(4, lumped=True).positions[-1]) - tip[:2]).max()
+    assert lumped > 1e-3 and lumped > 1e4 * exact
+
+
+def test_contact_gradient_matches_finite_differences():
+    def tip_height(ei):
+        return _solve_on_obstacle(4, EI=ei).positions[-1, 1]
+
+    g = float(jax.grad(tip_height)(EI))
+    h = 1e-5
+    fd = (float(tip_height(EI + h)) - float(tip_height(EI - h))) / (2 * h)
+    assert abs(g) > 1e-3
+    assert abs(g - fd) < 1e-6 * max(1.0, abs(fd))
+
+
+def test_contact_none_and_no_obstacles_keep_the_contact_free_model():
+    net = sj.cantilever(5, length=L, EI=EI, dim=2)
+    free = sj.solve(net, forces={-1: TIP})
+    none = sj.solve(net, forces={-1: TIP}, contact=None)
+    np.testing.assert_array_equal(np.asarray(free.positions), np.asarray(none.positions))
+    # the contact kernel (composite quadrature, jump corrections) with no obstacle at all
+    empty = sj.solve(net, forces={-1: TIP}, contact=sj.Contact(self_contact=False, surfaces=False))
+    np.testing.assert_allclose(np.asarray(empty.positions), np.asarray(free.positions), atol=1e-12)
+
+
+def test_channel_column_departs_from_the_elastica_at_the_wall():
+    h, delta = 0.1, 1e-4
+    net = sj.column(9, length=L, EI=EI, dim=2, supports=("pinned", "pinned"))
+    walls = (sj.Plane([0, -h], [0, 1]), sj.Plane([0, h], [0, -1]))
+    con = sj.Contact(diameter=D, planes=walls, self_contact=False, surfaces=False, activation=delta)
+    res = sj.compress(net, 0.03, contact=con, throw=False)
+    free = sj.compress(net, 0.03)
+    U, gap, F = np.asarray(res.displacement), np.asarray(res.min_gap), np.asarray(res.force)
+    assert np.all(gap > -0.01 * D)  # no penetration beyond 1 % of the diameter
+    # elastica (pinned–pinned, elliptic integrals): the contact force starts where the maximum
+    # deflection reaches h − d/2 − δ
+    y = h - D / 2 - delta
+    k = brentq(lambda k: k * L / ellipk(k**2) - y, 1e-6, 0.99)
+    onset = 2 * L * (1 - ellipe(k**2) / ellipk(k**2))
+    i = int(np.flatnonzero(gap < delta)[0])
+    found = np.interp(delta, [gap[i], gap[i - 1]], [U[i], U[i - 1]])
+    assert abs(found - onset) / L < 1e-3
+    # before: the contact-free curve; after: stiffer
+    before = U < onset - 1e-3
+    np.testing.assert_allclose(F[before], np.interp(U[before], np.asarray(free.displacement), np.asarray(free.force)),
+                               rtol=1e-6)
+    after = U > onset + 2e-3
+    assert after.any() and np.all(F[after] > np.interp(U[after], np.asarray(free.displacement), np.asarray(free.force)) + 1)
+    assert np.all(np.asarray(res.contact_count)[after] >= 1)
+
+
+def test_contact_input_errors_name_the_argument():
+    with pytest.raises(ValueError, match="normal"):
+        sj.Plane([0, 0], [0, 0])
+    with pytest.raises(ValueError, match="diameter"):
+        sj.Contact(diameter=-1.0)
+    with pytest.raises(TypeError, match="planes"):
+        sj.Contact(planes=[(0, 1)])
+    net2 = sj.cantilever(3, dim=2)
+    with pytest.raises(NotImplementedError, match="self_contact"):
+        sj.solve(net2, forces={-1: [0, -1.0]}, contact=sj.Contact())
+    with pytest.raises(NotImplementedError, match="3D"):
+        sj.solve(sj.cantilever(3), forces={-1: [0, -1.0, 0]}, contact=sj.Contact(self_contact=False))
+    with pytest.raises(ValueError, match="3D but the network is 2D"):
+        sj.solve(net2, contact=sj.Contact(planes=(sj.Plane([0, 0, 0], [0, 0, 1]),), self_contact=False))
