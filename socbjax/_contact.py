@@ -142,6 +142,15 @@ class Contact(eqx.Module):
         self.force_limit = opt("force_limit", force_limit, "pN")
         self.lumped = check_bool("lumped", lumped)
 
+    def as_dict(self) -> dict:
+        """JSON-able description (stored in a compression result's ``parameters["contact"]``,
+        drawn by the figures)."""
+        return {"diameter_um": self.diameter, "surfaces": self.surfaces, "self_contact": self.self_contact,
+                "planes": [{"point_um": p.point.tolist(), "normal": p.normal.tolist()} for p in self.planes],
+                "spheres": [{"center_um": o.center.tolist(), "radius_um": o.radius} for o in self.obstacles],
+                "activation_um": self.activation, "stiffness_pN_per_um": self.stiffness,
+                "force_limit_pN": self.force_limit, "lumped": self.lumped}
+
     def law(self, EI_mean) -> tuple:
         """(δ µm, k pN/µm) of this contact for a network of mean EI (pN·µm²): the defaults of
         the class docstring where not given."""

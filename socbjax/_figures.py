@@ -29,6 +29,9 @@ from ._plot import (
     MAX_SEGMENTS_WITH_NODES,
     chain_index,
     common_limits,
+    draw_contacts,
+    has_contact,
+    obstacle_points,
     draw_planes,
     draw_reference,
     draw_state,
@@ -239,7 +242,8 @@ def plot_force_curve(result: CompressionResult, ax=None) -> Figure:
     last loading step, dashed red); steps flagged unstable (``~result.stable``: sign(det J)
     differs from the start's) as hollow black circles; limit points as markers per kind, each
     labelled once with its kind and force; the path beyond the first surface crossing shaded;
-    the near-vertical rise at u ≈ 0 explained.  Legend entries in path order, outside the axes.
+    the near-vertical rise at u ≈ 0 explained; with contact, the number of contacts carrying
+    force per step on a second (right) axis.  Legend entries in path order, outside the axes.
     """
     own = ax is None
     fig, ax = _new_axes(ax, figsize=(7.6, 4.6))
@@ -252,10 +256,19 @@ def plot_force_curve(result: CompressionResult, ax=None) -> Figure:
     unstable = ~np.asarray(result.stable, bool)
     if unstable.any():
         ax.plot(u[unstable], F[unstable], "o", ls="none", mfc="none", mec="k", ms=5, label="unstable (sign det J flipped)")
+    contact = has_contact(result)
+    if contact:  # contacts carrying force per step, on a second axis
+        twin = ax.twinx()
+        twin.step(u, np.asarray(result.contact_count), where="mid", color="0.45", lw=1.0, zorder=1)
+        twin.set_ylabel("contacts carrying force", color="0.35")
+        twin.tick_params(axis="y", colors="0.35")
+        twin.set_ylim(bottom=0)
+        twin.yaxis.get_major_locator().set_params(integer=True)
+        ax.plot([], [], color="0.45", lw=1.0, label="contact count (right axis)")
     crossing = result.first_crossing
-    if crossing is not None:  # no contact model yet: mark where the path stops being physical
+    if crossing is not None:  # computed without contact: mark where the path stops being physical
         ax.axvspan(crossing.displacement, float(np.nanmax(u)), color="0.88", zorder=0,
-                   label="beyond the first surface/probe crossing\n(no contact model: not physical)")
+                   label="beyond the first surface/probe crossing\n(computed without contact: not physical)")
     _annotate_limit_points(ax, result, 0.55 if own else ax.get_position().width)  # own figure: the legend takes ≤ 45 %
     _annotate_jump(ax, result)
     ax.set_xlabel("probe displacement u (µm)")
@@ -268,7 +281,7 @@ def plot_force_curve(result: CompressionResult, ax=None) -> Figure:
     key = [(rank.get(n, 2 if n in kinds else 4), kinds.index(n) if n in kinds else 0) for n in names]
     order = sorted(range(len(names)), key=lambda i: key[i])
     ax.legend([handles[i] for i in order], [names[i] for i in order], fontsize=8, loc="upper left",
-              bbox_to_anchor=(1.02, 1.0), borderaxespad=0.0)
+              bbox_to_anchor=(1.16 if contact else 1.02, 1.0), borderaxespad=0.0)
     return fig
 
 
@@ -286,6 +299,11 @@ def _snapshot_legend(fig, result, three_d: bool) -> None:
     if not three_d:
         handles.append(Line2D([], [], color="0.1", lw=2.5, label="probe plane"))
         handles.append(Line2D([], [], color="0.55", lw=2.5, label="surface"))
+    if has_contact(result):
+        handles.append(Line2D([], [], color="C3", marker="x", mew=1.5, ls="none", label="contacts"))
+        obstacles = result.parameters.get("contact", {})
+        if not three_d and (obstacles.get("planes") or obstacles.get("spheres")):
+            handles.append(Line2D([], [], color="0.35", lw=2.0, label="obstacles"))
     fig.legend(handles=handles, loc="outside lower center", ncols=min(len(handles), 5), fontsize=8, frameon=False)
 
 
@@ -305,7 +323,7 @@ def _small_multiples(result, steps, curves, start, index, coords) -> Figure:
     from the settled start (the shape changes are hard to see in a 3D perspective)."""
     net, three_d = result.network, len(coords) == 3
     nodes = np.asarray(result.positions, float)[steps][..., list(coords)].reshape(-1, len(coords))
-    limits = common_limits(np.concatenate([curves.reshape(-1, len(coords)), nodes]))
+    limits = common_limits(np.concatenate([curves.reshape(-1, len(coords)), nodes, obstacle_points(result, coords)]))
     nrows, ncols, size = _panel_grid(len(steps), limits, three_d)
     fig = _figure(size)
     if three_d:  # constrained layout does not see the z labels of 3D axes: leave room for them
@@ -324,6 +342,7 @@ def _small_multiples(result, steps, curves, start, index, coords) -> Figure:
         draw_state(ax, net, result.positions[k], result.end_nodes, curves[j], index, coords,
                    _PHASE_COLOURS[phase] if 0 <= phase < len(_PHASE_COLOURS) else "C4",
                    moved=moved[j] if three_d else None, norm=norm)
+        draw_contacts(ax, result, k, coords)
         style_axes(ax, coords, limits)
         peak = ", peak force" if k == _loading_peak(result) else ""
         ax.set_title(f"step {k}, {_phase_name(result, k)}{peak}\n{_step_label(result, k)}", fontsize=8)
@@ -352,7 +371,8 @@ def plot_snapshots(result: CompressionResult, steps=None, ax=None, *, points_per
     "step k, phase" and "u = … µm, F = … pN".  Planar panels are coloured by phase and show
     the as-built network (grey, dashed), the surface and the probe plane at that step; 3D
     panels are coloured by each point's displacement from the settled start (colour bar, µm).
-    With ``ax``: all steps overlaid on it, one colour per step, the legend in path order.  A
+    With ``ax``: all steps overlaid on it, one colour per step, the legend in path order.  With
+    contact, the contact points that carry force are red crosses.  A
     planar result (2D, or 3D with one coordinate constant throughout) is drawn on 2D axes, a
     spatial one on 3D axes (``ax`` must then be 3D)."""
     net = result.network
@@ -367,6 +387,7 @@ def plot_snapshots(result: CompressionResult, steps=None, ax=None, *, points_per
     for colour, k, curve in zip(_colours(len(steps)), steps, curves[1:]):
         draw_state(ax, net, result.positions[k], result.end_nodes, curve, index, coords, colour,
                    label=f"step {k}, {_phase_name(result, k)}: {_step_label(result, k)}")
+        draw_contacts(ax, result, k, coords)
     nodes = np.asarray(result.positions, float)[steps][..., list(coords)].reshape(-1, len(coords))
     style_axes(ax, coords, common_limits(np.concatenate([curves[1:].reshape(-1, len(coords)), nodes])))
     ax.set_title("network shapes (smooth SOCB curves)")

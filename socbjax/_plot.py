@@ -16,12 +16,14 @@ import jax.numpy as jnp
 import matplotlib
 import numpy as np
 from matplotlib.collections import LineCollection
+from matplotlib.patches import Circle
 from matplotlib.colors import ListedColormap
 from matplotlib.ticker import MaxNLocator
 
 from ._curve import filament_curve
 
-__all__ = ["AXIS_NAMES", "DISPLACEMENT_CMAP", "chain_index", "common_limits", "draw_planes", "draw_reference", "draw_state",
+__all__ = ["AXIS_NAMES", "DISPLACEMENT_CMAP", "chain_index", "common_limits", "draw_contacts", "draw_planes", "draw_reference", "draw_state",
+           "has_contact", "obstacle_points",
            "drawn_axes", "label_offsets", "line_segments", "plot_shapes", "polylines", "step_curves", "style_axes"]
 
 AXIS_NAMES = ("x", "y", "z")
@@ -266,3 +268,39 @@ def label_offsets(ax, anchors, labels, defaults, size: float, width_fraction: fl
         placed.append(box)
         out.append(dy)
     return out
+
+
+def has_contact(result) -> bool:
+    """Whether ``result`` was computed with contact obstacles (it has contact slots)."""
+    return result.contact_points is not None and np.shape(result.contact_points)[1] > 0
+
+
+def draw_contacts(ax, result, k: int, coords, label=None) -> None:
+    """The contact points of step k that carry force, as red crosses, and (planar drawings)
+    the contact's own planes and spheres (``result.parameters["contact"]``), hatched grey."""
+    if not has_contact(result):
+        return
+    obstacles = result.parameters.get("contact", {})
+    if len(coords) == 2:
+        span = 1e3 * (1.0 + float(np.abs(np.asarray(result.positions)).max()))  # beyond any axis limits
+        for plane in obstacles.get("planes", []):
+            p, n = np.asarray(plane["point_um"])[list(coords)], np.asarray(plane["normal"])[list(coords)]
+            along = np.array([-n[1], n[0]])
+            ax.plot(*np.stack([p - span * along, p + span * along]).T, color="0.35", lw=2.0, zorder=1, scalex=False,
+                    scaley=False)
+        for sphere in obstacles.get("spheres", []):
+            c = np.asarray(sphere["center_um"])[list(coords)]
+            ax.add_patch(Circle(c, max(sphere["radius_um"], 0.0), color="0.35", zorder=1))
+            ax.plot(*c, "o", color="0.35", ms=3, zorder=1)
+    forces = np.asarray(result.contact_forces[k])
+    points = np.asarray(result.contact_points[k])[np.linalg.norm(forces, axis=-1) > 0][:, list(coords)]
+    if points.size:
+        ax.plot(*points.T, "x", color="C3", ms=6, mew=1.5, ls="none", zorder=5, label=label)
+
+
+def obstacle_points(result, coords) -> np.ndarray:
+    """[M, len(coords)] points that the drawing of ``result``'s contact planes and spheres
+    needs inside the axis limits (plane points; sphere centers; none without contact)."""
+    obstacles = result.parameters.get("contact", {}) if has_contact(result) else {}
+    points = [p["point_um"] for p in obstacles.get("planes", [])] + [o["center_um"] for o in obstacles.get("spheres", [])]
+    return np.asarray(points, float).reshape(-1, len(result.network.positions[0]))[:, list(coords)]

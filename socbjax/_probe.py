@@ -235,7 +235,8 @@ def observe(model, X, loads, U=None):
             outputs = (jnp.zeros((), jnp.int32), jnp.asarray(jnp.nan), jnp.zeros(()), empty, empty)
         else:
             points, gaps, F, counted = model.contact_geometry(st, Control.make(1.0, u))
-            touching = counted & (jnp.linalg.norm(F, axis=-1) > 0)
+            touching = counted & (gaps < contact.activation)  # the law's force is on
+            F = jnp.where(touching[..., None], F, 0.0)  # not round-off of a zero force
             probe = probe + jnp.sum(jnp.where(contact.moving[None, :] > 0, F @ axis, 0.0))
             outputs = (jnp.sum(touching).astype(jnp.int32), jnp.min(jnp.where(counted, gaps, jnp.inf)),
                        jnp.sum(jnp.linalg.norm(F, axis=-1)), points.reshape(-1, net.dim), F.reshape(-1, net.dim))

@@ -104,6 +104,14 @@ class CompressionResult(eqx.Module):
     limit_points: tuple = eqx.field(static=True, default=())
     parameters_json: str = eqx.field(static=True, default="{}")
 
+    def __post_init__(self):
+        # A result built without contact outputs (by hand, or by an older reader) reports no
+        # contact: count 0, gap NaN (no obstacle), force 0, no slots.
+        if self.contact_count is None:
+            K, d = np.shape(self.displacement)[0], self.network.dim
+            self.contact_count, self.min_gap = np.zeros(K, np.int32), np.full(K, np.nan)
+            self.contact_force, self.contact_points, self.contact_forces = np.zeros(K), np.zeros((K, 0, d)), np.zeros((K, 0, d))
+
     @property
     def parameters(self) -> dict[str, Any]:
         return json.loads(self.parameters_json)

@@ -119,6 +119,14 @@ def _add_simulate(sub) -> None:
     sim.add_argument(
         "--checkpoint-every", type=int, default=50, help="write OUT.ckpt.h5 every N accepted steps (default 50)"
     )
+    sim.add_argument(
+        "--contact",
+        action=argparse.BooleanOptionalAction,
+        default=False,
+        help="contact with the probe face and the substrate (rigid frictionless planes; planar networks, --dim 2, "
+        "so far; filament–filament contact is not built yet) (default: --no-contact)",
+    )
+    sim.add_argument("--diameter", type=float, default=0.007, help="filament diameter for --contact in µm (default 0.007)")
     sim.add_argument("--resume", action="store_true", help="continue an interrupted run from OUT.ckpt.h5")
     sim.add_argument("--figures", default=None, help="also write the figures (PNG) into this folder")
     sim.add_argument("--quiet", action="store_true", help="no progress bar")
@@ -304,6 +312,8 @@ def _simulate(args) -> int:
     checkpoint = out.with_name(out.name + ".ckpt.h5")
     _check_outputs(args, out, checkpoint)
     net, params, default_u = _build(args)
+    if args.contact and net.dim != 2:
+        raise ValueError("--contact is built for planar networks so far: add --dim 2 (3D contact is the next step)")
     displacement = default_u if args.displacement is None else args.displacement
     steps = {} if args.max_step is None else dict(max_step=args.max_step, initial_step=min(0.02, args.max_step))
     settings = sj.PathSettings(linear_solver=args.linear_solver, **steps)
@@ -326,6 +336,7 @@ def _simulate(args) -> int:
             checkpoint=sj.Checkpoint(checkpoint, every=args.checkpoint_every, resume=args.resume and checkpoint.exists()),
             throw=False,
             parameters=params,
+            contact=sj.Contact(diameter=args.diameter, self_contact=False) if args.contact else None,
         )
         sj.save(result, out)
         if checkpoint.exists():  # the path ended (whatever its result): a resume would only repeat it

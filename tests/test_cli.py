@@ -6,6 +6,7 @@ import stat
 import subprocess
 import sys
 
+import numpy as np
 import pytest
 
 import socbjax.cli
@@ -143,6 +144,18 @@ def test_simulate_column_then_plot(tmp_path, capsys):
     assert all((tmp_path / "figs" / p).stat().st_size > 5_000 for p in pngs)
 
 
+def test_simulate_with_contact_records_the_obstacles_and_contact_outputs(tmp_path, capsys):
+    out = tmp_path / "column.h5"
+    argv = ["simulate", "column", "--dim", "2", "--nodes", "5", "--displacement", "0.2", "--contact", "--diameter", "0.01",
+            "--out", str(out), "--quiet"]
+    assert socbjax.cli.main(argv) == 0
+    result = socbjax.load(out)
+    contact = result.parameters["contact"]
+    assert contact["diameter_um"] == 0.01 and contact["surfaces"] and not contact["self_contact"]
+    assert result.contact_points.shape[1] == 4 * 2  # a slot per segment for the probe face and the substrate
+    assert np.all(result.min_gap > -0.01 * 0.01)  # nothing crosses the probe face or the substrate
+
+
 # ------------------------------------------------------------------ errors and output paths
 def _user_error(capsys, argv) -> str:
     """Run the command line; it must fail with exit 2 and one line ``socbjax: error: ...``."""
@@ -162,6 +175,7 @@ def _user_error(capsys, argv) -> str:
     (["simulate", "column", "--out", "{tmp}"], ["--out", "folder"]),
     (["simulate", "column", "--displacement", "5", "--out", "{tmp}/c.h5"], ["gap"]),
     (["simulate", "unit-mesh", "--GJ", "-0.1", "--out", "{tmp}/c.h5"], ["--GJ", "'-0.1'", "'none'"]),
+    (["simulate", "column", "--contact", "--out", "{tmp}/c.h5"], ["--contact", "--dim 2"]),
     (["plot", "{tmp}/nothing.h5"], ["nothing.h5"]),
     (["plot", "{tmp}/not-hdf5.h5"], ["not-hdf5.h5", "not a valid socbjax result"]),
     (["plot", "{tmp}/not-hdf5.h5", "--steps", "1,x"], ["--steps"]),

@@ -108,7 +108,7 @@ def test_contact_none_and_no_obstacles_keep_the_contact_free_model():
     np.testing.assert_allclose(np.asarray(empty.positions), np.asarray(free.positions), atol=1e-12)
 
 
-def test_channel_column_departs_from_the_elastica_at_the_wall():
+def test_channel_column_departs_from_the_elastica_at_the_wall(tmp_path):
     h, delta = 0.1, 1e-4
     net = sj.column(9, length=L, EI=EI, dim=2, supports=("pinned", "pinned"))
     walls = (sj.Plane([0, -h], [0, 1]), sj.Plane([0, h], [0, -1]))
@@ -132,6 +132,15 @@ def test_channel_column_departs_from_the_elastica_at_the_wall():
     after = U > onset + 2e-3
     assert after.any() and np.all(F[after] > np.interp(U[after], np.asarray(free.displacement), np.asarray(free.force)) + 1)
     assert np.all(np.asarray(res.contact_count)[after] >= 1)
+    assert np.all(np.asarray(res.contact_count)[before] == 0) and np.all(np.asarray(res.contact_force)[before] == 0)
+    # the contact outputs survive the file, and the figures mark the contacts and draw the walls
+    back = sj.load(sj.save(res, tmp_path / "channel.h5"))
+    for name in ("contact_count", "min_gap", "contact_force", "contact_points", "contact_forces"):
+        np.testing.assert_array_equal(np.asarray(getattr(back, name)), np.asarray(getattr(res, name)))
+    assert back.parameters["contact"]["planes"][1]["normal"] == [0.0, -1.0]
+    fig = sj.plot_force_curve(back)
+    assert any(a.get_ylabel() == "contacts carrying force" for a in fig.axes)
+    assert "contacts" in [t.get_text() for t in sj.plot_snapshots(back).legends[0].get_texts()]
 
 
 def test_contact_input_errors_name_the_argument():

@@ -100,7 +100,7 @@ def test_file_layout_units_and_stamps(tmp_path):
         # headers, out of HDF5's unchecksummed global heap.
         text = {name: f.attrs[name].decode() for name in ("format", "socbjax_version", "created", "result")}
         assert text["format"] == "socbjax.compression" and text["socbjax_version"] == sj.__version__
-        assert f.attrs["format_version"] == 4 and text["result"] == "max_steps"
+        assert f.attrs["format_version"] == 5 and text["result"] == "max_steps"
         assert f["path/twists"].shape == (7, 4) and f["units"].attrs["twists"].decode() == "rad"
         assert f["units"].attrs["displacement"].decode() == "µm" and f["units"].attrs["moments"].decode() == "pN·µm"
         assert f["path/force"].attrs["units"].decode() == "pN"
@@ -191,7 +191,7 @@ def test_foreign_and_future_files_rejected(tmp_path):
     with pytest.raises(ValueError, match="socbjax.compression file"):
         sj.load_checkpoint(path)
     with h5py.File(path, "a") as f:
-        f.attrs["format_version"] = 5
+        f.attrs["format_version"] = 6
     with pytest.raises(ValueError, match="newer socbjax"):
         sj.load(path)
 
@@ -221,7 +221,7 @@ def test_checkpoint_round_trip_is_bitwise(tmp_path, rng):
         assert isinstance(got, np.ndarray) and got.dtype == value.dtype and got.shape == value.shape, name
         assert got.tobytes() == value.tobytes(), name
     with h5py.File(path, "r") as f:
-        assert f.attrs["format"].decode() == "socbjax.checkpoint" and f.attrs["format_version"] == 4
+        assert f.attrs["format"].decode() == "socbjax.checkpoint" and f.attrs["format_version"] == 5
     with pytest.raises(ValueError, match="socbjax.checkpoint file"):
         sj.load(path)
 
