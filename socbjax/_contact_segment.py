@@ -219,10 +219,16 @@ def _slot_rows(ends, points, s, sigma, F, theta_k, kappa_k, coef, a, length, own
         # far from a plane the slot rests at the segment's middle (its force is 0 there
         # anyway): the closest-point rule, whose choice of branch may jump while a segment is
         # straight and parallel to the plane, takes over smoothly inside the band
-        # gap < max(10 δ, l/20).  A sphere's distance is curved along any segment (d²φ/ds² > 0
+        # gap < max(10 δ, l/20) (of the segment's lowest possible gap).  A sphere's distance is curved along any segment (d²φ/ds² > 0
         # near it): its rule holds everywhere (a band there moves the slot along a fold).
         band = jnp.maximum(10.0 * setup.activation, 0.05 * length)
-        x = jnp.clip(2.0 * (band - gaps) / band, 0.0, 1.0)
+        # the band is tested on a lower bound of the segment's gap, not the gap at the current
+        # σ (a slot resting at σ = ½ would not see an end of an inclined segment reach the
+        # plane): every curve point lies within l/2 of the chord's midpoint (inextensible)
+        middle = 0.5 * (ends[0] + ends[1])
+        lowest = jnp.stack([_signed_distance(setup, k, middle, displacement, axis)[0]
+                            for k in range(setup.n_obstacles)]) - 0.5 * length - setup.filament_radius
+        x = jnp.clip(2.0 * (band - lowest) / band, 0.0, 1.0)
         near = jnp.where(sphere, 1.0, x * x * (3.0 - 2.0 * x))
         location = near * closest + (1.0 - near) * (sigma - 0.5)
         owned = jnp.where(s >= 1.0, owns_end, 1.0) * jnp.where(s <= 0.0, owns_start, 1.0)

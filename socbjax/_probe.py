@@ -234,12 +234,13 @@ def observe(model, X, loads, U=None):
             empty = jnp.zeros((0, net.dim))
             outputs = (jnp.zeros((), jnp.int32), jnp.asarray(jnp.nan), jnp.zeros(()), empty, empty)
         else:
-            points, gaps, F, counted = model.contact_geometry(st, Control.make(1.0, u))
+            points, gaps, F, counted = model.contact_geometry(st, Control.make(1.0, u))  # [S, C, ...]
             touching = counted & (gaps < contact.activation)  # the law's force is on
             F = jnp.where(touching[..., None], F, 0.0)  # not round-off of a zero force
             probe = probe + jnp.sum(jnp.where(contact.moving[None, :] > 0, F @ axis, 0.0))
-            outputs = (jnp.sum(touching).astype(jnp.int32), jnp.min(jnp.where(counted, gaps, jnp.inf)),
-                       jnp.sum(jnp.linalg.norm(F, axis=-1)), points.reshape(-1, net.dim), F.reshape(-1, net.dim))
+            lowest = jnp.min(jnp.where(counted, gaps, jnp.inf)) if model.n_obstacles else jnp.asarray(jnp.nan)
+            outputs = (jnp.sum(touching).astype(jnp.int32), lowest, jnp.sum(jnp.linalg.norm(F, axis=-1)),
+                       points.reshape(-1, net.dim), F.reshape(-1, net.dim))
         return (st.positions, state_tangents(st.directors, net.dim), st.moments, st.forces, probe, -axial, twists,
                 *outputs)
 
@@ -307,6 +308,8 @@ def package_path(model, rec, extra, result, settings, u_max, unload, parameters)
               "n_nodes": int(net.n_nodes), "n_segments": int(net.n_segments), "n_junctions": int(net.n_junctions),
               "gap_um": probe_gap(net) if np.isfinite(probe_gap(net)) else None, **(parameters or {})}
     crossed = np.flatnonzero(surface_crossing(net, positions, np.asarray(rec["U"])))
+    if getattr(model, "contact", None) is not None and not (parameters or {}).get("contact", {}).get("surfaces", True):
+        crossed = crossed[:0]  # contact without surfaces: the user says there are no probe face and substrate
     events = _limit_points(np.asarray(rec["U"]), probe_force, rec["SIGN"], rec["PHASE"])
     if crossed.size:
         k = int(crossed[0])

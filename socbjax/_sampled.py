@@ -202,6 +202,8 @@ def compress_at(model, displacement, at=None, *, unload=False, perturbation=None
     positions, tangents, moments, forces, probe_force, axial, twists = observed[:7]
     count, min_gap, contact_force, contact_points, contact_forces = observed[7:]
     crossed = jnp.any(surface_crossing(net, positions, U) & converged)
+    if getattr(model, "contact", None) is not None and not (parameters or {}).get("contact", {}).get("surfaces", True):
+        crossed = jnp.asarray(False)  # contact without surfaces: the user says there are no probe face and substrate
     result = RESULTS.where((result == RESULTS.successful) & crossed, RESULTS.surface_crossed, result)
     M = at.shape[0]
     ends = end_nodes(net)

@@ -157,3 +157,21 @@ def test_contact_input_errors_name_the_argument():
         sj.solve(sj.cantilever(3), forces={-1: [0, -1.0, 0]}, contact=sj.Contact(self_contact=False))
     with pytest.raises(ValueError, match="3D but the network is 2D"):
         sj.solve(net2, contact=sj.Contact(planes=(sj.Plane([0, 0, 0], [0, 0, 1]),), self_contact=False))
+
+
+def test_a_tip_pressed_onto_a_wall_rests_on_it_and_the_forces_balance():
+    """The lowest point of an inclined end segment is its tip, far from the segment's middle:
+    the contact must be found there (the plane would otherwise be crossed unseen)."""
+    net = sj.cantilever(5, length=L, EI=EI, dim=2)
+    load = np.array([0.0, -2.0])
+    wall = sj.Plane([0.0, -0.3], [0.0, 1.0])
+    free = sj.solve(net, forces={-1: load})
+    assert float(free.positions[-1, 1]) < -0.35  # without the wall the tip goes through it
+    sol = sj.solve(net, forces={-1: load}, contact=sj.Contact(diameter=D, planes=(wall,), self_contact=False,
+                                                                surfaces=False))
+    delta = D / 10
+    tip_gap = float(sol.positions[-1, 1]) + 0.3 - D / 2
+    assert -0.01 * D < tip_gap < delta
+    slots = np.asarray(sol.state.contacts)[:, 0]
+    assert slots[-1, 0] == 1.0 and slots[-1, 2] > 0.5  # at the tip (σ = 1), pushing up
+    np.testing.assert_allclose(np.asarray(sol.reactions[0]) + load + slots[:, 1:3].sum(axis=0), 0.0, atol=1e-8)
