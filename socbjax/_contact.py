@@ -29,7 +29,7 @@ import equinox as eqx
 import jax.numpy as jnp
 import numpy as np
 
-from ._checks import check_array, check_bool, check_real, describe
+from ._checks import check_array, check_bool, check_int, check_real, describe
 
 __all__ = ["Plane", "Sphere", "Contact", "DEFAULT_DIAMETER", "penalty_force"]
 
@@ -102,9 +102,15 @@ class Contact(eqx.Module):
     diameter : filament diameter d (µm; default 0.007, actin).
     planes : extra rigid planes (:class:`Plane`), e.g. the walls of a channel.
     obstacles : rigid spheres / point obstacles (:class:`Sphere`).
-    self_contact : contact between non-adjacent pieces of filament.  Not built yet (see
-        ``docs/equations.md`` "Contact"): solving with ``self_contact=True`` raises
-        ``NotImplementedError``; pass ``self_contact=False`` for obstacle contact.
+    self_contact : contact between non-adjacent pieces of filament (any two segments that do
+        not share a node: other filaments and the same one), found by a fixed-capacity
+        spatial-hash broad phase (:mod:`socbjax._contact_pairs`); uses the dense linear
+        solver (the pairs change the Jacobian's pattern).
+    capacity : pair slots (default max(16, 2 S) for S segments); more candidates stop the path
+        with ``RESULTS.contact_capacity``.
+    per_segment : most pairs per segment and segments per hash cell (default 8).
+    reach : µm beyond touching at which a pair enters the list (default max(l/4, 20 δ), l the
+        mean segment length); a path step may move no segment farther than reach/2.
     surfaces : add the probe face (moving with the probe) and the substrate (the plane of the
         farthest opposing support) for networks with a probe.
     activation : δ (µm) at which the contact force starts; default d/10.
@@ -128,9 +134,13 @@ class Contact(eqx.Module):
     stiffness: float | None = None
     force_limit: float | None = None
     lumped: bool = False
+    capacity: int | None = None
+    per_segment: int = 8
+    reach: float | None = None
 
     def __init__(self, diameter=DEFAULT_DIAMETER, planes=(), self_contact=True, surfaces=True, *, obstacles=(),
-                 activation=None, stiffness=None, force_limit=None, lumped=False):
+                 activation=None, stiffness=None, force_limit=None, lumped=False, capacity=None, per_segment=8,
+                 reach=None):
         self.diameter = check_real("Contact diameter", diameter, "µm", low=0.0, traced_ok=False)
         self.planes = _obstacles("planes", planes, Plane)
         self.obstacles = _obstacles("obstacles", obstacles, Sphere)
@@ -141,6 +151,9 @@ class Contact(eqx.Module):
         self.stiffness = opt("stiffness", stiffness, "pN/µm")
         self.force_limit = opt("force_limit", force_limit, "pN")
         self.lumped = check_bool("lumped", lumped)
+        self.capacity = None if capacity is None else check_int("capacity", capacity, minimum=1, maximum=10**6)
+        self.per_segment = check_int("per_segment", per_segment, minimum=1, maximum=1024)
+        self.reach = opt("reach", reach, "µm")
 
     def as_dict(self) -> dict:
         """JSON-able description (stored in a compression result's ``parameters["contact"]``,

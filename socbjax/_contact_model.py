@@ -12,6 +12,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from ._contact import Contact
+from ._contact_pairs import adjacent_segments
 from ._contact_segment import ContactSetup
 from ._network import Network
 from ._probe import probe_frame
@@ -82,9 +83,6 @@ def contact_setup(network: Network, contact: Contact | None, *, dense: bool = Fa
     if network.dim != 2:
         raise NotImplementedError("contact is built for planar (2D) networks so far; 3D contact (outcrops) is the "
                                   "next step of issue 15. Use contact=None for 3D networks.")
-    if contact.self_contact:
-        raise NotImplementedError("Contact(self_contact=True): filament–filament and self-contact are not built yet "
-                                  "(obstacles and surfaces are); pass socbjax.Contact(self_contact=False, ...)")
     if network.padding is not None:
         raise ValueError("contact is not supported on padded networks (socbjax.pad_outcrop); solve each realisation")
     for i, obstacle in enumerate(contact.planes + contact.obstacles):
@@ -96,7 +94,21 @@ def contact_setup(network: Network, contact: Contact | None, *, dense: bool = Fa
     EI, length = jnp.mean(network.EI), jnp.mean(network.lengths)
     delta, k = contact.law(EI)
     f = lambda v: jnp.asarray(v, jnp.float64)  # noqa: E731
+    S = network.n_segments
+    capacity = (max(16, 2 * S) if contact.capacity is None else contact.capacity) if contact.self_contact else 0
+    reach = jnp.maximum(0.25 * length, 20.0 * delta) if contact.reach is None else contact.reach
     return ContactSetup(kinds=kinds, points=f(points), normals=f(normals), radii=f(radii), moving=f(moving),
                         owns_start=f(owns_start), owns_end=f(owns_end), filament_radius=f(contact.diameter / 2),
-                        activation=f(delta), stiffness=f(k), force_scale=f(EI / length**2), dense=dense,
+                        activation=f(delta), stiffness=f(k), force_scale=f(EI / length**2),
+                        seg_owns_start=f(_free_bases(network)), adjacent=jnp.asarray(adjacent_segments(network)),
+                        reach=f(reach), capacity=capacity, per_segment=contact.per_segment, dense=dense,
                         lumped=contact.lumped)
+
+
+def _free_bases(network: Network) -> np.ndarray:
+    """[S] 1 where the segment's start node is a filament base (not the end of another segment,
+    not a daughter base): the σ = 0 point it owns in filament–filament contact."""
+    seg, attach = np.asarray(network.segments), np.asarray(network.attach)
+    is_end = np.zeros(network.n_nodes, bool)
+    is_end[seg[:, 1]] = True
+    return (~is_end & (attach == np.arange(network.n_nodes)))[seg[:, 0]].astype(float)

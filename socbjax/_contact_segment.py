@@ -63,6 +63,11 @@ class ContactSetup(eqx.Module):
     activation: jax.Array  # δ (µm)
     stiffness: jax.Array  # k (pN/µm)
     force_scale: jax.Array  # pN, to make the λ rows dimensionless
+    seg_owns_start: jax.Array = None  # [S] 1 where a segment owns its σ = 0 point (filament bases)
+    adjacent: jax.Array = None  # [S, A] segments sharing a node (never a contact pair), −1 padded
+    reach: jax.Array = None  # µm: how far beyond touching a pair enters the list (≥ 2 × a step's motion)
+    capacity: int = eqx.field(static=True, default=0)  # pair slots P (0: no filament–filament contact)
+    per_segment: int = eqx.field(static=True, default=0)  # pairs per segment and segments per hash cell
     dense: bool = eqx.field(static=True, default=False)  # template: every dependence switched on
     lumped: bool = eqx.field(static=True, default=False)  # forces lumped to nodes (comparison only)
 
@@ -126,7 +131,7 @@ def _signed_distance(setup: ContactSetup, k: int, r, displacement, axis):
 
 
 def planar_contact_segment(ends, n_a, length, EI, kappa0, slots, owns_start, owns_end, setup: ContactSetup,
-                           displacement, axis, quad):
+                           displacement, axis, quad, extra=None):
     """One planar segment with its contact slots.
 
     ends : (r_a [2], θ_a, m_a, r_b [2], θ_b, m_b): positions µm, angles rad, moments pN·µm
@@ -136,13 +141,18 @@ def planar_contact_segment(ends, n_a, length, EI, kappa0, slots, owns_start, own
         angle and curvature there; owns_start, owns_end : [C] (1: the σ = 0 / σ = 1 point
         belongs to this segment; a node counts once, and a node anchored on an obstacle —
         a probe tip on the probe face, a base on the substrate — never);
-    displacement, axis : probe displacement (µm) and direction, for the moving probe face.
+    displacement, axis : probe displacement (µm) and direction, for the moving probe face;
+    extra : [M, 5] more interior point forces in the same layout (filament–filament contacts,
+        :mod:`socbjax._contact_pairs`; zero force where unused), or None.
     Returns (segment rows [4] as :func:`socbjax._segment.planar_segment_residual`, slot rows
     [C, 5], end force n_b [2] (pN), the force [2] (pN) lumped onto the start node (zero
-    unless ``setup.lumped``), contact points [C, 2] (µm), gaps [C] (µm)).
+    unless ``setup.lumped``), contact points [C, 2] (µm), gaps [C] (µm), and for ``extra``
+    (points [M, 2] µm, θ [M] rad, dθ/dσ [M] at its σ)).
     """
     r_a, theta_a, m_a, r_b, theta_b, m_b = ends
-    sigma, F, theta_k, kappa_k = slots[:, 0], slots[:, 1:3], slots[:, 3], slots[:, 4]
+    C = slots.shape[0]
+    every = slots if extra is None else jnp.concatenate([slots, extra])
+    sigma, F, theta_k, kappa_k = every[:, 0], every[:, 1:3], every[:, 3], every[:, 4]
     s = jnp.clip(sigma, 0.0, 1.0)
     turn = jnp.arctan2(jnp.sin(theta_b - theta_a), jnp.cos(theta_b - theta_a))
     F_node = F
@@ -155,27 +165,30 @@ def planar_contact_segment(ends, n_a, length, EI, kappa0, slots, owns_start, own
                       theta_a + turn - end_c[0], length * (m_b / EI + kappa0) - end_d1[0],
                       -length**2 * _cross(theta_a + turn, n_b) / EI - end_d2[0]])
     coef = jnp.asarray(_MINV) @ data
-    # composite Gauss–Legendre between the sorted slot points (θ'' jumps there)
+    # composite Gauss–Legendre between the sorted force points (θ'' jumps there)
     breaks = jnp.concatenate([jnp.zeros(1), jnp.sort(s), jnp.ones(1)])
     widths = jnp.diff(breaks)
     x = (breaks[:-1, None] + widths[:, None] * jnp.asarray(quad.points)[None, :]).ravel()
     W = (widths[:, None] * jnp.asarray(quad.weights)[None, :]).ravel()
     theta, _ = _angle(x, coef, s, a)
     t = jnp.stack([jnp.cos(theta), jnp.sin(theta)], axis=-1)
-    after = (x[None, :] > s[:, None]).astype(x.dtype)  # [C, P]
+    after = (x[None, :] > s[:, None]).astype(x.dtype)  # [Q, P]
     chord = r_b - r_a
-    to_end = length * (after * W) @ t  # r_b − r_k  [C, 2]
-    tail = length**2 * (after * W * (1.0 - x)) @ t  # ∫_{s_k}^l (l − s) t ds  [C, 2]
+    to_end = length * (after * W) @ t  # r_b − r_k  [Q, 2]
+    tail = length**2 * (after * W * (1.0 - x)) @ t  # ∫_{s_k}^l (l − s) t ds  [Q, 2]
     lever = length**2 * ((W * (1.0 - x)) @ t)
     length_eq = (chord - length * (W @ t)) / length
     moment_eq = (m_b - m_a + _cross2(chord, n_a) - jnp.sum(_cross2(to_end, F))) * length / EI
     bending_eq = (EI * (turn - kappa0 * length) - (m_a * length - _cross2(lever, n_a) + jnp.sum(_cross2(tail, F)))) / EI
     seg_rows = jnp.concatenate([length_eq, moment_eq[None], bending_eq[None]])
     points = r_a + length * ((1.0 - after) * W) @ t  # r_k
-    slot_rows, gaps = _slot_rows((r_a, r_b), points, s, sigma, slots[:, 1:3], theta_k, kappa_k, coef, a, length, owns_start, owns_end,
+    theta_at, dtheta_at = _angle(s, coef, s, a)
+    slot_rows, gaps = _slot_rows((r_a, r_b), points[:C], s[:C], sigma[:C], slots[:, 1:3],
+                                 theta_k[:C], kappa_k[:C], theta_at[:C], dtheta_at[:C], length, owns_start, owns_end,
                                  setup, displacement, axis)
-    start_load = jnp.sum(slots[:, 1:3] - F_node, axis=0) if setup.lumped else jnp.zeros(2)
-    return seg_rows, slot_rows, n_a - jnp.sum(F_node, axis=0), start_load, points, gaps
+    start_load = jnp.sum(every[:, 1:3] - F_node, axis=0) if setup.lumped else jnp.zeros(2)
+    return (seg_rows, slot_rows, n_a - jnp.sum(F_node, axis=0), start_load, points[:C], gaps,
+            (points[C:], theta_at[C:], dtheta_at[C:]))
 
 
 def _cross(theta, n):
@@ -186,12 +199,11 @@ def _cross2(u, v):
     return u[..., 0] * v[..., 1] - u[..., 1] * v[..., 0]
 
 
-def _slot_rows(ends, points, s, sigma, F, theta_k, kappa_k, coef, a, length, owns_start, owns_end, setup, displacement,
-               axis):
+def _slot_rows(ends, points, s, sigma, F, theta_k, kappa_k, theta_at, dtheta_at, length, owns_start, owns_end, setup,
+               displacement, axis):
     """Rows [C, 5] of the slots (dimensionless) and their gaps [C] (µm)."""
     if setup.n_obstacles == 0:
         return jnp.zeros((0, SLOT_WIDTH)), jnp.zeros(0)
-    theta_at, dtheta_at = _angle(s, coef, s, a)
     phi, grad = [], []
     for k in range(setup.n_obstacles):  # a handful of obstacles: unrolled
         p, g = _signed_distance(setup, k, points[k], displacement, axis)
@@ -240,20 +252,22 @@ def _slot_rows(ends, points, s, sigma, F, theta_k, kappa_k, coef, a, length, own
 
 
 def contact_segment_rows(positions, angles, moments, m_start, forces, slots, network, setup: ContactSetup, control,
-                         quad):
+                         quad, extra=None):
     """All planar segments with their slots (vmapped): (segment rows [S, 4], slot rows
     [S, C, 5], end forces n_b [S, 2] pN, start-node loads [S, 2] pN, contact points [S, C, 2]
-    µm, gaps [S, C] µm)."""
+    µm, gaps [S, C] µm, and at the ``extra`` forces [S, M, 5] (pair contacts): points, θ, dθ/dσ)."""
     a, b = network.segments[:, 0], network.segments[:, 1]
     ends = (positions[a], angles[a], m_start, positions[b], angles[b], moments[b])
     axis = jnp.asarray(network.probe_direction, positions.dtype)
 
-    def one(end, n, length, EI, kappa0, slot, own_a, own_b):
+    extra = jnp.zeros((network.n_segments, 0, SLOT_WIDTH)) if extra is None else extra
+
+    def one(end, n, length, EI, kappa0, slot, own_a, own_b, more):
         return planar_contact_segment(end, n, length, EI, kappa0, slot, own_a, own_b, setup, control.displacement,
-                                      axis, quad)
+                                      axis, quad, more)
 
     return jax.vmap(one)(ends, forces, network.lengths, network.EI, network.natural_curvature, slots,
-                         setup.owns_start, setup.owns_end)
+                         setup.owns_start, setup.owns_end, extra)
 
 
 def initial_slots(network, setup: ContactSetup | None, angles) -> jax.Array:

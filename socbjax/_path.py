@@ -231,10 +231,13 @@ class PathProblem(eqx.Module):
         return self.model.frames(self.unravel()(x))
 
     def admissible(self, x0, x1):
-        """Whether the step x0 → x1 passes the model's own test (contact: no filament moved
-        through an obstacle; :meth:`socbjax.SOCBModel.step_admissible`); True if it has none."""
+        """(whether the step x0 → x1 passes the model's own test, whether the model's capacity
+        overflowed there): contact, no filament moved through an obstacle or another filament,
+        and no more contact pairs than slots (:meth:`socbjax.SOCBModel.step_admissible`)."""
         test = getattr(self.model, "step_admissible", None)
-        return jnp.asarray(True) if test is None else test(self.unravel()(x0), self.unravel()(x1))
+        if test is None:
+            return jnp.asarray(True), jnp.asarray(False)
+        return test(self.unravel()(x0), self.unravel()(x1))
 
 
 def _norm(weights, v):
@@ -407,7 +410,8 @@ def _attempt(c: PathState, problem, param, settings, newton, recorder) -> PathSt
     y1, result, iterations, sign, v, residual_norm = _correct(problem, guess, border, newton)
     converged = result == RESULTS.successful
     ok, tau1, sign_flip, fold = _accept(c, problem, param, settings, y, guess, y1, converged, sign, v)
-    ok = ok & (problem.admissible(c.x, y1[:-1]) | ~c.primed)
+    admissible, overflow = problem.admissible(c.x, y1[:-1])
+    ok = ok & (admissible | ~c.primed) & ~(overflow & converged)
     primed = c.primed
     fast = iterations <= settings.fast_iterations
     grown = jnp.minimum(jnp.where(fast, settings.grow, 1.0) * c.ds, settings.max_step)
@@ -427,6 +431,7 @@ def _attempt(c: PathState, problem, param, settings, newton, recorder) -> PathSt
                             RESULTS.where(sign_rejected, RESULTS.critical_point, RESULTS.step_too_small))
     out = RESULTS.where(small, failure, RESULTS.successful)
     out = RESULTS.where(~primed & ~ok, RESULTS.not_equilibrium, out)
+    out = RESULTS.where(overflow & converged, RESULTS.contact_capacity, out)
     full = (steps >= settings.max_steps) | (attempts >= settings.max_attempts)
     out = RESULTS.where((out == RESULTS.successful) & ~done_ok & full, RESULTS.max_steps, out)
     return PathState(

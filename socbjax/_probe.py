@@ -234,13 +234,15 @@ def observe(model, X, loads, U=None):
             empty = jnp.zeros((0, net.dim))
             outputs = (jnp.zeros((), jnp.int32), jnp.asarray(jnp.nan), jnp.zeros(()), empty, empty)
         else:
-            points, gaps, F, counted = model.contact_geometry(st, Control.make(1.0, u))  # [S, C, ...]
+            points, gaps, F, counted, _ = model.contact_geometry(st, Control.make(1.0, u))
             touching = counted & (gaps < contact.activation)  # the law's force is on
             F = jnp.where(touching[..., None], F, 0.0)  # not round-off of a zero force
-            probe = probe + jnp.sum(jnp.where(contact.moving[None, :] > 0, F @ axis, 0.0))
-            lowest = jnp.min(jnp.where(counted, gaps, jnp.inf)) if model.n_obstacles else jnp.asarray(jnp.nan)
-            outputs = (jnp.sum(touching).astype(jnp.int32), lowest, jnp.sum(jnp.linalg.norm(F, axis=-1)),
-                       points.reshape(-1, net.dim), F.reshape(-1, net.dim))
+            C = model.n_obstacles
+            if C:
+                face = F[: net.n_segments * C].reshape(net.n_segments, C, -1) @ axis
+                probe = probe + jnp.sum(jnp.where(contact.moving[None, :] > 0, face, 0.0))
+            lowest = jnp.min(jnp.where(counted, gaps, jnp.inf)) if gaps.size else jnp.asarray(jnp.nan)
+            outputs = (jnp.sum(touching).astype(jnp.int32), lowest, jnp.sum(jnp.linalg.norm(F, axis=-1)), points, F)
         return (st.positions, state_tangents(st.directors, net.dim), st.moments, st.forces, probe, -axial, twists,
                 *outputs)
 

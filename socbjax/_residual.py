@@ -41,6 +41,7 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, Float
 
+from ._contact_pairs import PAIR_WIDTH, PairList, broad_phase, initial_pairs, merge_pairs, pair_extra, pair_rows, segment_table
 from ._contact_segment import SLOT_WIDTH, ContactSetup, contact_segment_rows, initial_slots
 from ._geometry import orthonormal_complement
 from ._junction import director_targets, moment_transfer, nodal_couple_transfer
@@ -92,6 +93,7 @@ class SOCBState(eqx.Module):
     forces: Float[Array, "S d"]  # internal force per segment (pN)
     twists: Array  # material-frame angles [N] (rad) of a twisting network, else [0]
     contacts: Array  # contact slots [S, C, 5] (σ, F pN, θ rad, κ 1/µm; socbjax._contact_segment), C = 0 without
+    pairs: Array  # filament–filament contact slots [P, 10] (socbjax._contact_pairs), P = 0 without
 
 
 def n_twists(network: Network) -> int:
@@ -190,9 +192,16 @@ def socb_residual(state: SOCBState, network: Network, control: Control, frames: 
     m_start = m[network.segments[:, 0]] - junction_segment - couple_segment
     end_forces, slot_rows, loads = None, jnp.zeros(0), control.load_factor * network.loads
     if contact is not None:
-        seg, slot_rows, end_forces, start_loads, _, _ = contact_segment_rows(r, d, m, m_start, state.forces,
-                                                                             state.contacts, network, contact, control, quad)
+        extra, pair_frame = None, None
+        if contact.capacity:
+            frames, pair_frame = frames
+            extra = pair_extra(state.pairs, pair_frame.table)
+        seg, slot_rows, end_forces, start_loads, _, _, at_pairs = contact_segment_rows(
+            r, d, m, m_start, state.forces, state.contacts, network, contact, control, quad, extra)
         loads = loads + jax.ops.segment_sum(start_loads, network.segments[:, 0], num_segments=network.n_nodes)
+        if pair_frame is not None:
+            slot_rows = jnp.concatenate([slot_rows.ravel(), pair_rows(state.pairs, pair_frame, at_pairs, network,
+                                                                      contact)[0].ravel()])
     else:
         seg = _segment_rows(state, network, quad, frames, m_start)
     imbalance = routed_nodal_force(state.forces, network, loads, end_forces)
@@ -215,7 +224,7 @@ def socb_residual(state: SOCBState, network: Network, control: Control, frames: 
     return jnp.concatenate([seg.ravel(), candidates.ravel()[network.socb_rows]])
 
 
-def socb_structure(network: Network, n_obstacles: int = 0):
+def socb_structure(network: Network, n_obstacles: int = 0, n_pairs: int = 0):
     """Graph structure of the SOCB system, for sparse Jacobians (host side, numpy).
 
     Vertices are the nodes (0..N−1) and segments (N..N+S−1); edges join a segment to its two
@@ -235,7 +244,8 @@ def socb_structure(network: Network, n_obstacles: int = 0):
     seg_rows, width = (4, 4) if d == 2 else (9 if network.twisting else 7, node_row_width(network))
     rows = np.concatenate([np.repeat(n_nodes + np.arange(n_seg), seg_rows), np.asarray(network.socb_rows) // width])
     slots = np.repeat(n_nodes + np.arange(n_seg), n_obstacles * SLOT_WIDTH)  # contact slots: at their segment
-    unknown, rows = np.concatenate([unknown, slots]), np.concatenate([rows, slots])
+    pairs = np.zeros(n_pairs * PAIR_WIDTH, int)  # pair slots join any two segments: dense solver only
+    unknown, rows = np.concatenate([unknown, slots, pairs]), np.concatenate([rows, slots, pairs])
     seg, attach = np.asarray(network.segments), np.asarray(network.attach)
     daughters = np.flatnonzero(attach != node_ids)
     edges = np.concatenate([
@@ -265,14 +275,19 @@ class SOCBModel(eqx.Module):
             directors, moments = net.tangents, jnp.zeros((net.n_nodes, 3))
         return SOCBState(positions=net.positions, directors=directors, moments=moments,
                          forces=jnp.zeros((net.n_segments, net.dim)), twists=jnp.zeros(n_twists(net)),
-                         contacts=initial_slots(net, self.contact, directors))
+                         contacts=initial_slots(net, self.contact, directors), pairs=initial_pairs(self.n_pairs))
 
     @property
     def n_unknowns(self) -> int:
         """Size of the flat state (host side, no tracing)."""
         net, w = self.network, (1 if self.network.dim == 2 else 3)
         return (net.n_nodes * (net.dim + 2 * w) + net.n_segments * (net.dim + self.n_obstacles * SLOT_WIDTH)
-                + n_twists(net))
+                + n_twists(net) + self.n_pairs * PAIR_WIDTH)
+
+    @property
+    def n_pairs(self) -> int:
+        """Filament–filament contact slots P (0 without self-contact)."""
+        return 0 if self.contact is None else self.contact.capacity
 
     @property
     def n_obstacles(self) -> int:
@@ -281,60 +296,113 @@ class SOCBModel(eqx.Module):
 
     def structure(self):
         """See :func:`socb_structure`."""
-        return socb_structure(self.network, self.n_obstacles)
+        return socb_structure(self.network, self.n_obstacles, self.n_pairs)
 
     def frames(self, state: SOCBState):
-        return _frames(state, self.network)
+        """Held fixed during a Newton solve: the 3D analysis bases, and with self-contact the
+        pair list rebuilt from ``state`` (:mod:`socbjax._contact_pairs`)."""
+        bases = _frames(state, self.network)
+        if not self.n_pairs:
+            return bases
+        return bases, self.pair_list(state)
+
+    def pair_list(self, state: SOCBState, rebuild: bool = True) -> PairList:
+        """The pairs of ``state``: its own ids (``rebuild=False``) or, merged with them, those
+        of a fresh broad phase at its positions."""
+        net, c = self.network, self.contact
+        ids = jax.lax.stop_gradient(state.pairs[:, :2]).astype(jnp.int64)
+        overflow = jnp.asarray(False)
+        if rebuild:
+            r = jax.lax.stop_gradient(state.positions)
+            a, b = net.segments[:, 0], net.segments[:, 1]
+            found, overflow = broad_phase(0.5 * (r[a] + r[b]), 0.5 * net.lengths, 2.0 * c.filament_radius + c.reach,
+                                          c.adjacent, c.capacity, c.per_segment)
+            ids = merge_pairs(ids, found, net.n_segments)
+        table, crowded = segment_table(ids, net.n_segments, c.per_segment)
+        return PairList(ids=ids, table=table, overflow=overflow | crowded)
 
     def residual(self, state: SOCBState, control: Control, frames):
         return socb_residual(state, self.network, control, frames, self.quad, self.contact)
 
     def contact_geometry(self, state: SOCBState, control: Control | None = None):
-        """(contact points [S, C, 2] µm, gaps [S, C] µm, forces on the filament [S, C, 2] pN,
-        counted [S, C] bool) of the slots of ``state`` (2D contact models only); a slot is
-        not counted where its closest point is a node that another segment owns or that is
-        anchored on the obstacle (a probe tip on the probe face)."""
-        net = self.network
-        control = Control.make() if control is None else control
+        """Contact slots of ``state`` (2D contact models): (points [c, 2] µm, gaps [c] µm,
+        forces on the filament [c, 2] pN, counted [c] bool, end forces [S, 2] pN) over the
+        c = S·C obstacle slots, then the P pair slots (their point on segment i; force on i).
+        A slot is not counted where its point is a node that another segment owns or that is
+        anchored on the obstacle (a probe tip on the probe face), nor where a pair slot is
+        empty."""
+        return self._contact_parts(state, Control.make() if control is None else control)[:5]
+
+    def _contact_parts(self, state: SOCBState, control: Control):
+        """:meth:`contact_geometry`'s outputs and the pair slots' points on both sides [P, 2, 2]."""
+        net, c = self.network, self.contact
         m = state.moments
         junction_segment, _ = moment_transfer(state, net)
         couple_segment, _ = nodal_couple_transfer(control.load_factor * net.couples, net)
         m_start = m[net.segments[:, 0]] - junction_segment - couple_segment
-        _, _, _, _, points, gaps = contact_segment_rows(state.positions, state.directors, m, m_start, state.forces,
-                                                     state.contacts, net, self.contact, control, self.quad)
+        frame = self.pair_list(state, rebuild=False) if self.n_pairs else None
+        extra = None if frame is None else pair_extra(state.pairs, frame.table)
+        _, _, end_forces, _, points, gaps, at_pairs = contact_segment_rows(
+            state.positions, state.directors, m, m_start, state.forces, state.contacts, net, c, control, self.quad, extra)
         s = jnp.clip(state.contacts[..., 0], 0.0, 1.0)
-        counted = (jnp.where(s >= 1.0, self.contact.owns_end, 1.0) * jnp.where(s <= 0.0, self.contact.owns_start, 1.0)) > 0
-        return points, gaps, state.contacts[..., 1:3], counted
+        counted = (jnp.where(s >= 1.0, c.owns_end, 1.0) * jnp.where(s <= 0.0, c.owns_start, 1.0)) > 0
+        out = (points.reshape(-1, 2), gaps.reshape(-1), state.contacts[..., 1:3].reshape(-1, 2), counted.reshape(-1))
+        both = jnp.zeros((0, 2, 2))
+        if frame is not None:
+            _, pair_gaps, both = pair_rows(state.pairs, frame, at_pairs, net, c)
+            out = (jnp.concatenate([out[0], both[:, 0]]), jnp.concatenate([out[1], pair_gaps]),
+                   jnp.concatenate([out[2], state.pairs[:, 4:6]]), jnp.concatenate([out[3], frame.ids[:, 0] >= 0]))
+        return (*out, end_forces, both)
 
-    def step_admissible(self, old: SOCBState, new: SOCBState) -> Array:
-        """False when a path step may have carried a segment through a sphere or point
-        obstacle (a plane cannot be crossed unseen: the gap turns negative).  Each curve point
-        of a segment moves by at most D = max |Δr| at its nodes + l · max |Δθ| along it (taken
-        as 1.5 × the larger nodal turn); a segment whose axis was φ from a sphere's surface
-        cannot reach it if D < φ."""
-        if self.contact is None or "sphere" not in self.contact.kinds:
-            return jnp.asarray(True)
+    def step_admissible(self, old: SOCBState, new: SOCBState):
+        """(admissible, overflow) of a path step.  Not admissible when a segment may have moved
+        through a sphere or point obstacle or through another segment (a plane cannot be
+        crossed unseen: the gap turns negative): each curve point of a segment moves by at
+        most D = max |Δr| at its nodes + l · max |Δθ| along it (taken as 1.5 × the larger nodal
+        turn), and a segment whose axis was φ from a surface cannot reach it if D < φ (pairs:
+        D_i + D_j < axis distance; pairs not in the list are farther than ``reach`` apart, so
+        2 max D < reach).  Overflow: the new state has more candidate pairs than the capacity."""
+        c = self.contact
+        if c is None or ("sphere" not in c.kinds and not self.n_pairs):
+            return jnp.asarray(True), jnp.asarray(False)
         net = self.network
         a, b = net.segments[:, 0], net.segments[:, 1]
         moved = jnp.linalg.norm(new.positions - old.positions, axis=-1)
         turned = jnp.abs(new.directors - old.directors)
         turned = 1.5 * jnp.maximum(turned[a], turned[b])  # the turn inside a segment, with a margin
         reach = jnp.maximum(moved[a], moved[b]) + net.lengths * turned  # [S]
-        _, gaps, _, _ = self.contact_geometry(old)
-        spheres = np.array([k == "sphere" for k in self.contact.kinds])
-        phi = gaps[:, spheres] + self.contact.filament_radius
-        return jnp.all(reach[:, None] < phi)
+        _, gaps, _, _, _ = self.contact_geometry(old)
+        C, S = self.n_obstacles, net.n_segments
+        spheres = np.array([k == "sphere" for k in c.kinds], bool)
+        phi = gaps[: S * C].reshape(S, C)[:, spheres] + c.filament_radius
+        ok = jnp.all(reach[:, None] < phi)
+        if not self.n_pairs:
+            return ok, jnp.asarray(False)
+        ids = jnp.clip(old.pairs[:, :2].astype(jnp.int64), 0, S - 1)
+        axis_distance = jnp.where(old.pairs[:, 0] >= 0, gaps[S * C:] + 2.0 * c.filament_radius, jnp.inf)
+        # a listed pair that moved closer than D_i + D_j: still on the same side of each other
+        # (the separation of its closest points along the old direction has not turned over)
+        sep_old, sep_new = self._pair_separation(old), self._pair_separation(new)
+        same_side = jnp.sum(sep_old * sep_new, axis=-1) > 0
+        near = reach[ids[:, 0]] + reach[ids[:, 1]] >= axis_distance
+        ok = ok & jnp.all(~near | same_side) & (2.0 * jnp.max(reach) < c.reach)
+        return ok, self.pair_list(new).overflow
+
+    def _pair_separation(self, state: SOCBState) -> Array:
+        """[P, 2] r_i − r_j between the closest points of each pair slot (µm; 0 if empty)."""
+        both = self._contact_parts(state, Control.make())[5]
+        return both[:, 0] - both[:, 1]
 
     def contact_ends(self, state: SOCBState):
         """(internal force at each segment's end [S, d] pN, extra nodal loads [N, d] pN): the
         state's (start) forces less the segments' interior contact forces, and the loads that
         lumped contact (comparison only) puts on start nodes; (forces, 0) without contact."""
         zero = jnp.zeros_like(state.positions)
-        if not self.n_obstacles:
+        if self.contact is None:
             return state.forces, zero
+        if self.n_pairs or not self.contact.lumped:
+            return self.contact_geometry(state)[4], zero
         F = state.contacts[..., 1:3]
-        if not self.contact.lumped:
-            return state.forces - jnp.sum(F, axis=1), zero
         s = jnp.clip(state.contacts[..., :1], 0.0, 1.0)
         start = jax.ops.segment_sum(jnp.sum((1.0 - s) * F, axis=1), self.network.segments[:, 0],
                                     num_segments=self.network.n_nodes)

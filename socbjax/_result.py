@@ -169,7 +169,7 @@ class CompressionResult(eqx.Module):
         row = RESULTS.where(jnp.asarray(self.converged)[i], RESULTS.successful, RESULTS.not_reached)
         twists = self.twists[i] if net.twisting else jnp.zeros(0)
         state = SOCBState(positions=positions, directors=directors, moments=moments, forces=forces, twists=twists,
-                          contacts=jnp.zeros((net.n_segments, 0, 5)))
+                          contacts=jnp.zeros((net.n_segments, 0, 5)), pairs=jnp.zeros((0, 10)))
         zero = jnp.zeros((), jnp.int32)
         return Solution(positions=positions, tangents=tangents, angles=angles, moments=moments, curvatures=curvatures,
                         segment_forces=forces, reactions=reactions, result=row, iterations=jnp.asarray(self.iterations)[i],

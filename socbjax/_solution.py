@@ -32,6 +32,10 @@ class RESULTS(optx.RESULTS):  # pyright: ignore
         "control cannot follow it; use method='arclength' to follow the path through folds"
     )
     max_steps = "the continuation used up its step budget (PathSettings.max_steps / max_attempts)"
+    contact_capacity = (
+        "more filament pairs came within contact range than the pair list holds (socbjax.Contact capacity / "
+        "per_segment); raise them"
+    )
     not_equilibrium = "the start of the path is not an equilibrium (Newton did not converge there)"
     not_reached = "a requested sample lies beyond the part of the path that was followed"
     did_not_move = (

@@ -131,4 +131,6 @@ def prepare_sparse_solver(model) -> ColouredSparseLU:
 def linear_solver_for(model, kind: str = "auto"):
     """:class:`DenseLU` or the prepared :class:`ColouredSparseLU` for ``model`` ("dense",
     "sparse", or "auto": sparse above 1,500 unknowns).  Host side; works for traced values."""
+    if getattr(model, "n_pairs", 0):  # filament–filament pairs change the pattern from step to step
+        return DenseLU()
     return prepare_sparse_solver(model) if solver_kind(kind, model.n_unknowns) == "sparse" else DenseLU()

@@ -151,8 +151,9 @@ def test_contact_input_errors_name_the_argument():
     with pytest.raises(TypeError, match="planes"):
         sj.Contact(planes=[(0, 1)])
     net2 = sj.cantilever(3, dim=2)
-    with pytest.raises(NotImplementedError, match="self_contact"):
-        sj.solve(net2, forces={-1: [0, -1.0]}, contact=sj.Contact())
+    assert sj.Contact().self_contact and sj.Contact().surfaces  # the contract's defaults
+    with pytest.raises(ValueError, match="per_segment"):
+        sj.Contact(per_segment=0)
     with pytest.raises(NotImplementedError, match="3D"):
         sj.solve(sj.cantilever(3), forces={-1: [0, -1.0, 0]}, contact=sj.Contact(self_contact=False))
     with pytest.raises(ValueError, match="3D but the network is 2D"):

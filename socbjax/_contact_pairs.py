@@ -1,0 +1,196 @@
+"""Filament–filament and self-contact (planar): the broad phase, the pair slots and their rows.
+
+Every pair of non-adjacent segments that may touch gets a *pair slot* in a list of fixed
+capacity P (``Contact(capacity=...)``): the two segments' ids, and eight unknowns: the
+locations σ_i, σ_j of the closest points of the two smooth curves, the contact force F on
+segment i (−F acts on j, pN), and θ, κ at both points (as the obstacle slots of
+:mod:`socbjax._contact_segment`, whose segment kernel carries both forces exactly).
+
+Broad phase (a spatial hash, jax-md style, fixed capacity): a segment's curve lies inside the
+circle of radius l/2 around its chord's midpoint (inextensible: |p − a| + |p − b| ≤ l for every
+point p, an ellipse inside that circle).  Segments are hashed to square cells of side
+max l + d + reach; each segment looks at its own and the 8 neighbouring cells (at most
+``per_segment`` segments per cell) and keeps partners j > i whose circles come within d + reach
+(``reach``: how far the next path step may move a segment, enforced by the path's
+admissibility test).  Segments sharing a node never pair.  The list is rebuilt from the state
+before every path step (:meth:`socbjax.SOCBModel.frames`): pairs still in range keep their
+slot (and unknowns), new ones take free slots.  More candidates than slots, or a segment in
+more than ``per_segment`` pairs, is an *overflow*: reported (``RESULTS.contact_capacity``),
+never truncated silently.  No recompilation when the contact set changes: ids are data.
+"""
+
+from __future__ import annotations
+
+import itertools
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from ._contact import penalty_force
+
+__all__ = ["PAIR_WIDTH", "PairList", "adjacent_segments", "broad_phase", "merge_pairs", "segment_table", "pair_extra",
+           "pair_rows", "initial_pairs"]
+
+PAIR_WIDTH = 10  # i, j (ids, as numbers), σ_i, σ_j, F_x, F_y, θ_i, κ_i, θ_j, κ_j
+_OFFSET, _BASE = 2**19, 2**20  # integer cell coordinates -> one int64 key
+
+
+class PairList(eqx.Module):
+    """The pair list of one path step: ids [P, 2] (segments i < j; −1: empty slot), table
+    [S, M, 2] (pair slot and side 0/1 of each pair that touches segment s; −1: none) and
+    overflow (bool: more candidates than the capacity)."""
+
+    ids: jax.Array
+    table: jax.Array
+    overflow: jax.Array
+
+
+def adjacent_segments(network) -> np.ndarray:
+    """[S, A] the segments that share a node with each segment (junction daughters share
+    their mother's node), −1 padded (host side)."""
+    seg = np.asarray(network.segments)
+    attach = np.asarray(network.attach)
+    node_of = attach[seg]  # daughter bases count as their mother node
+    touching = [set() for _ in range(len(seg))]
+    by_node: dict[int, list[int]] = {}
+    for s, (a, b) in enumerate(node_of):
+        by_node.setdefault(int(a), []).append(s)
+        by_node.setdefault(int(b), []).append(s)
+    for members in by_node.values():
+        for s in members:
+            touching[s].update(m for m in members if m != s)
+    width = max(1, max(len(t) for t in touching))
+    out = -np.ones((len(seg), width), np.int64)
+    for s, t in enumerate(touching):
+        out[s, : len(t)] = sorted(t)
+    return out
+
+
+def _keys(q):
+    q = q + _OFFSET
+    key = q[..., 0]
+    for k in range(1, q.shape[-1]):
+        key = key * _BASE + q[..., k]
+    return key
+
+
+def broad_phase(centers, radii, reach, adjacent, capacity: int, per_segment: int):
+    """(ids [capacity, 2] (−1 empty), overflow) of the segment pairs whose bounding circles
+    (centers [S, d] µm, radii [S] µm) come within ``reach`` µm, from a spatial hash."""
+    S, d = centers.shape
+    h = 2.0 * jnp.max(radii) + reach
+    q = jnp.floor(centers / h).astype(jnp.int64)
+    key = _keys(q)
+    order = jnp.argsort(key)
+    sorted_keys = key[order]
+    offsets = jnp.asarray(list(itertools.product((-1, 0, 1), repeat=d)), jnp.int64)
+    near = _keys(q[:, None, :] + offsets[None])  # [S, O]
+    start = jnp.searchsorted(sorted_keys, near, side="left")
+    stop = jnp.searchsorted(sorted_keys, near, side="right")
+    crowded = jnp.any(stop - start > per_segment)
+    idx = start[..., None] + jnp.arange(per_segment)  # [S, O, M]
+    j = order[jnp.clip(idx, 0, S - 1)]
+    i = jnp.broadcast_to(jnp.arange(S)[:, None, None], j.shape)
+    dist = jnp.linalg.norm(centers[i] - centers[j], axis=-1)
+    ok = (idx < stop[..., None]) & (j > i) & (dist < radii[i] + radii[j] + reach)
+    ok = ok & ~jnp.any(jnp.asarray(adjacent)[i] == j[..., None], axis=-1)
+    flat = ok.ravel()
+    chosen = jnp.nonzero(flat, size=capacity, fill_value=flat.size)[0]
+    pairs = jnp.stack([i.ravel(), j.ravel()], axis=1)
+    ids = jnp.where((chosen < flat.size)[:, None], pairs[jnp.clip(chosen, 0, flat.size - 1)], -1)
+    return ids, crowded | (jnp.sum(flat) > capacity)
+
+
+def merge_pairs(old, new, n_segments: int):
+    """Pair ids [P, 2] that keep every old pair still in ``new`` in its slot and put the other
+    new pairs in the free slots (the new list has at most P pairs, so they fit)."""
+    P = old.shape[0]
+    okey = jnp.where(old[:, 0] >= 0, old[:, 0] * n_segments + old[:, 1], -1)
+    nkey = jnp.where(new[:, 0] >= 0, new[:, 0] * n_segments + new[:, 1], -2)
+    keep = (okey >= 0) & jnp.isin(okey, nkey)
+    fresh = (nkey >= 0) & ~jnp.isin(nkey, jnp.where(keep, okey, -3))
+    free_slots = jnp.nonzero(~keep, size=P, fill_value=P)[0]
+    rank = jnp.cumsum(fresh) - 1
+    target = jnp.where(fresh, free_slots[jnp.clip(rank, 0, P - 1)], P)
+    ids = jnp.where(keep[:, None], old, -1)
+    return ids.at[target].set(new, mode="drop")
+
+
+def segment_table(ids, n_segments: int, per_segment: int):
+    """([S, M, 2] (pair slot, side) of the pairs at each segment, −1 empty; overflow)."""
+    P = ids.shape[0]
+    ends = ids.reshape(-1)
+    slot = jnp.repeat(jnp.arange(P), 2)
+    side = jnp.tile(jnp.arange(2), P)
+    key = jnp.where(ends >= 0, ends, n_segments)
+    order = jnp.argsort(key, stable=True)
+    sk = key[order]
+    start = jnp.searchsorted(sk, jnp.arange(n_segments), side="left")
+    stop = jnp.searchsorted(sk, jnp.arange(n_segments), side="right")
+    idx = start[:, None] + jnp.arange(per_segment)
+    o = order[jnp.clip(idx, 0, 2 * P - 1)]
+    table = jnp.where((idx < stop[:, None])[..., None], jnp.stack([slot[o], side[o]], axis=-1), -1)
+    return table, jnp.any(stop - start > per_segment)
+
+
+def pair_extra(pairs, table):
+    """[S, M, 5] interior point forces (σ, F, θ, κ) that the pairs put on each segment."""
+    p, side = jnp.maximum(table[..., 0], 0), jnp.maximum(table[..., 1], 0)
+    row = pairs[p]  # [S, M, PAIR_WIDTH]
+    sign = jnp.where(side == 0, 1.0, -1.0)[..., None]
+    used = (table[..., 0] >= 0)[..., None]
+    take = lambda col: jnp.take_along_axis(row, col[..., None], axis=-1)  # noqa: E731
+    extra = jnp.concatenate([take(2 + side), sign * row[..., 4:6], take(6 + 2 * side), take(7 + 2 * side)], axis=-1)
+    idle = jnp.asarray([0.5, 0.0, 0.0, 0.0, 0.0])
+    return jnp.where(used, extra, idle)
+
+
+def pair_rows(pairs, frame: PairList, outputs, network, setup):
+    """Rows [P, PAIR_WIDTH] of the pair slots (dimensionless) and their gaps [P] (µm; +inf
+    for empty slots).  ``outputs``: the segment kernel's (points [S, M, 2], θ [S, M],
+    dθ/dσ [S, M]) at the pairs' points."""
+    points, theta_at, dtheta_at = outputs
+    S, M = frame.table.shape[:2]
+    P = pairs.shape[0]
+    # where each (pair slot, side) sits in the segment table
+    flat = frame.table.reshape(-1, 2)
+    where = jnp.full((P, 2), S * M, jnp.int64).at[jnp.where(flat[:, 0] >= 0, flat[:, 0], P), flat[:, 1]].set(
+        jnp.arange(S * M), mode="drop")
+    valid = (frame.ids[:, 0] >= 0) & jnp.all(where < S * M, axis=1)
+    at = jnp.clip(where, 0, S * M - 1)
+    r = points.reshape(-1, 2)[at]  # [P, 2 sides, 2]
+    th, dth = theta_at.reshape(-1)[at], dtheta_at.reshape(-1)[at]
+    seg = jnp.clip(frame.ids, 0, S - 1)
+    length = network.lengths[seg]  # [P, 2]
+    sigma, F = pairs[:, 2:4], pairs[:, 4:6]
+    theta_k, kappa_k = pairs[:, 6:10:2], pairs[:, 7:10:2]
+    diff = r[:, 0] - r[:, 1]
+    dist = jnp.sqrt(jnp.sum(diff**2, axis=-1) + 1e-300)
+    u = diff / dist[:, None]
+    gaps = dist - 2.0 * setup.filament_radius
+    tangent = jnp.stack([jnp.cos(theta_k), jnp.sin(theta_k)], axis=-1)  # [P, 2, 2]
+    slope = jnp.stack([jnp.sum(u * tangent[:, 0], -1), -jnp.sum(u * tangent[:, 1], -1)], axis=1)
+    s = jnp.clip(sigma, 0.0, 1.0)
+    bias = 0.05 * jnp.clip(gaps[:, None] / length, 0.0, 1.0) ** 2 * (sigma - 0.5)
+    band = jnp.maximum(10.0 * setup.activation, 0.05 * length)
+    x = jnp.clip(2.0 * (band - gaps[:, None]) / band, 0.0, 1.0)
+    near = x * x * (3.0 - 2.0 * x)
+    location = near * (sigma - jnp.clip(sigma - slope - bias, 0.0, 1.0)) + (1.0 - near) * (sigma - 0.5)
+    owned = jnp.prod(jnp.where(s <= 0.0, setup.seg_owns_start[seg], 1.0), axis=1)  # a node counts once
+    magnitude = owned * penalty_force(gaps, setup.activation, setup.stiffness)
+    force = (F - magnitude[:, None] * u) / setup.force_scale
+    rows = jnp.concatenate([location, force, theta_k[:, :1] - th[:, :1], length[:, :1] * kappa_k[:, :1] - dth[:, :1],
+                            theta_k[:, 1:] - th[:, 1:], length[:, 1:] * kappa_k[:, 1:] - dth[:, 1:]], axis=1)
+    idle = jnp.concatenate([sigma - 0.5, F / setup.force_scale, theta_k[:, :1], kappa_k[:, :1], theta_k[:, 1:],
+                            kappa_k[:, 1:]], axis=1)
+    rows = jnp.where(valid[:, None], rows, idle)
+    id_rows = pairs[:, :2] - frame.ids.astype(pairs.dtype)  # the list is held during a step
+    return jnp.concatenate([id_rows, rows], axis=1), jnp.where(valid, gaps, jnp.inf), jnp.where(valid[:, None, None], r, 0.0)
+
+
+def initial_pairs(capacity: int) -> jax.Array:
+    """[P, PAIR_WIDTH] empty pair slots (ids −1, σ = ½, no force)."""
+    one = jnp.asarray([-1.0, -1.0, 0.5, 0.5, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0])
+    return jnp.broadcast_to(one, (capacity, PAIR_WIDTH))
