@@ -100,9 +100,19 @@ def contact_setup(network: Network, contact: Contact | None, *, dense: bool = Fa
     return ContactSetup(kinds=kinds, points=f(points), normals=f(normals), radii=f(radii), moving=f(moving),
                         owns_start=f(owns_start), owns_end=f(owns_end), filament_radius=f(contact.diameter / 2),
                         activation=f(delta), stiffness=f(k), force_scale=f(EI / length**2),
+                        smooth_start=f(_continues(network)[0]), smooth_end=f(_continues(network)[1]),
                         seg_owns_start=f(_free_bases(network)), adjacent=jnp.asarray(adjacent_segments(network)),
                         reach=f(reach), capacity=capacity, per_segment=contact.per_segment, dense=dense,
                         lumped=contact.lumped)
+
+
+def _continues(network: Network) -> tuple[np.ndarray, np.ndarray]:
+    """([S], [S]): 1 where another segment ends at the segment's start node / starts at its
+    end node (the filament goes on smoothly through that node; a daughter's base is a corner)."""
+    seg = np.asarray(network.segments)
+    is_end, is_start = np.zeros(network.n_nodes, bool), np.zeros(network.n_nodes, bool)
+    is_end[seg[:, 1]], is_start[seg[:, 0]] = True, True
+    return is_end[seg[:, 0]].astype(float), is_start[seg[:, 1]].astype(float)
 
 
 def _free_bases(network: Network) -> np.ndarray:

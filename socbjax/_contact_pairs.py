@@ -29,6 +29,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from ._contact import penalty_force
+from ._contact_segment import handover_weight
 
 __all__ = ["PAIR_WIDTH", "PairList", "adjacent_segments", "broad_phase", "merge_pairs", "segment_table", "pair_extra",
            "pair_rows", "initial_pairs"]
@@ -147,10 +148,11 @@ def pair_extra(pairs, table):
     return jnp.where(used, extra, idle)
 
 
-def pair_rows(pairs, frame: PairList, outputs, network, setup):
-    """Rows [P, PAIR_WIDTH] of the pair slots (dimensionless) and their gaps [P] (µm; +inf
-    for empty slots).  ``outputs``: the segment kernel's (points [S, M, 2], θ [S, M],
-    dθ/dσ [S, M]) at the pairs' points."""
+def pair_rows(pairs, frame: PairList, outputs, network, setup, nodes):
+    """Rows [P, PAIR_WIDTH] of the pair slots (dimensionless), their gaps [P] (µm; +inf for
+    empty slots) and points [P, 2 sides, 2] (µm).  ``outputs``: the segment kernel's (points
+    [S, M, 2], θ [S, M], dθ/dσ [S, M]) at the pairs' points; ``nodes``: (positions [N, 2] µm,
+    angles [N] rad) of the state."""
     points, theta_at, dtheta_at = outputs
     S, M = frame.table.shape[:2]
     P = pairs.shape[0]
@@ -174,11 +176,31 @@ def pair_rows(pairs, frame: PairList, outputs, network, setup):
     slope = jnp.stack([jnp.sum(u * tangent[:, 0], -1), -jnp.sum(u * tangent[:, 1], -1)], axis=1)
     s = jnp.clip(sigma, 0.0, 1.0)
     bias = 0.05 * jnp.clip(gaps[:, None] / length, 0.0, 1.0) ** 2 * (sigma - 0.5)
+    # the band is judged on the pair's lowest possible gap (bounding circles of radius l/2
+    # around the chords' midpoints), not on the gap at the current σ: a slot resting at σ = ½
+    # would not see the segments' ends approach
     band = jnp.maximum(10.0 * setup.activation, 0.05 * length)
-    x = jnp.clip(2.0 * (band - gaps[:, None]) / band, 0.0, 1.0)
+    r_nodes, angle_nodes = nodes
+    a, b = jnp.asarray(network.segments)[seg, 0], jnp.asarray(network.segments)[seg, 1]  # [P, 2]
+    centers = 0.5 * (r_nodes[a] + r_nodes[b])
+    lowest = (jnp.linalg.norm(centers[:, 0] - centers[:, 1], axis=-1) - 0.5 * jnp.sum(length, axis=1)
+              - 2.0 * setup.filament_radius)
+    x = jnp.clip(2.0 * (band - lowest[:, None]) / band, 0.0, 1.0)
     near = x * x * (3.0 - 2.0 * x)
     location = near * (sigma - jnp.clip(sigma - slope - bias, 0.0, 1.0)) + (1.0 - near) * (sigma - 0.5)
-    owned = jnp.prod(jnp.where(s <= 0.0, setup.seg_owns_start[seg], 1.0), axis=1)  # a node counts once
+    # each side's node hand-over (as for obstacles): the slope at its end nodes of the distance
+    # to the other side's closest point
+    other = r[:, ::-1]  # [P, 2 sides, 2]
+
+    def node_slope(node):
+        offset = r_nodes[node] - other
+        t = jnp.stack([jnp.cos(angle_nodes[node]), jnp.sin(angle_nodes[node])], axis=-1)
+        return jnp.sum(offset * t, axis=-1) / jnp.sqrt(jnp.sum(offset**2, axis=-1) + 1e-300)
+
+    slopes = jnp.stack([node_slope(a), node_slope(b)])  # [2 ends, P, 2 sides]
+    one = jnp.ones_like(s)
+    owned = jnp.prod(handover_weight(s, slopes, setup.seg_owns_start[seg], one, (setup.smooth_start[seg],
+                                                                                  setup.smooth_end[seg])), axis=1)
     magnitude = owned * penalty_force(gaps, setup.activation, setup.stiffness)
     force = (F - magnitude[:, None] * u) / setup.force_scale
     rows = jnp.concatenate([location, force, theta_k[:, :1] - th[:, :1], length[:, :1] * kappa_k[:, :1] - dth[:, :1],

@@ -35,7 +35,7 @@ import numpy as np
 from ._contact import penalty_force
 from ._quadrature import coupling_matrix
 
-__all__ = ["ContactSetup", "SLOT_WIDTH", "planar_contact_segment", "segment_jumps", "contact_segment_rows", "initial_slots"]
+__all__ = ["ContactSetup", "SLOT_WIDTH", "planar_contact_segment", "segment_jumps", "contact_segment_rows", "initial_slots", "handover_weight"]
 
 _MINV = np.linalg.inv(coupling_matrix(1.0))  # Hermite data (σ-units) -> monomial coefficients
 _POW = np.arange(6)
@@ -45,6 +45,9 @@ _FACT = np.array([2.0, 6.0, 24.0, 120.0])
 # toward the segment's middle keeps the row regular where φ is flat along the segment (a
 # straight segment parallel to a wall).  It fades as (gap/l)², so it is 0 in contact.
 _LOCATION_BIAS = 0.05
+# A node inside a filament is a closest point only where ∇φ·t = 0 there (the curve is C¹): the
+# force moves from one segment's slot to the next one's over this range of that slope.
+_HANDOVER = 0.02
 SLOT_WIDTH = 5  # unknowns per 2D slot: σ, F_x, F_y, θ, κ
 
 
@@ -63,6 +66,8 @@ class ContactSetup(eqx.Module):
     activation: jax.Array  # δ (µm)
     stiffness: jax.Array  # k (pN/µm)
     force_scale: jax.Array  # pN, to make the λ rows dimensionless
+    smooth_start: jax.Array = None  # [S] 1 where the filament continues smoothly before the start node
+    smooth_end: jax.Array = None  # [S] 1 where it continues after the end node
     seg_owns_start: jax.Array = None  # [S] 1 where a segment owns its σ = 0 point (filament bases)
     adjacent: jax.Array = None  # [S, A] segments sharing a node (never a contact pair), −1 padded
     reach: jax.Array = None  # µm: how far beyond touching a pair enters the list (≥ 2 × a step's motion)
@@ -131,7 +136,7 @@ def _signed_distance(setup: ContactSetup, k: int, r, displacement, axis):
 
 
 def planar_contact_segment(ends, n_a, length, EI, kappa0, slots, owns_start, owns_end, setup: ContactSetup,
-                           displacement, axis, quad, extra=None):
+                           displacement, axis, quad, extra=None, smooth=(0.0, 0.0)):
     """One planar segment with its contact slots.
 
     ends : (r_a [2], θ_a, m_a, r_b [2], θ_b, m_b): positions µm, angles rad, moments pN·µm
@@ -143,7 +148,9 @@ def planar_contact_segment(ends, n_a, length, EI, kappa0, slots, owns_start, own
         a probe tip on the probe face, a base on the substrate — never);
     displacement, axis : probe displacement (µm) and direction, for the moving probe face;
     extra : [M, 5] more interior point forces in the same layout (filament–filament contacts,
-        :mod:`socbjax._contact_pairs`; zero force where unused), or None.
+        :mod:`socbjax._contact_pairs`; zero force where unused), or None;
+    smooth : (1 where the filament continues through the start node, the same for the end
+        node): the node hand-over of the slots' forces (:func:`handover_weight`).
     Returns (segment rows [4] as :func:`socbjax._segment.planar_segment_residual`, slot rows
     [C, 5], end force n_b [2] (pN), the force [2] (pN) lumped onto the start node (zero
     unless ``setup.lumped``), contact points [C, 2] (µm), gaps [C] (µm), and for ``extra``
@@ -183,9 +190,9 @@ def planar_contact_segment(ends, n_a, length, EI, kappa0, slots, owns_start, own
     seg_rows = jnp.concatenate([length_eq, moment_eq[None], bending_eq[None]])
     points = r_a + length * ((1.0 - after) * W) @ t  # r_k
     theta_at, dtheta_at = _angle(s, coef, s, a)
-    slot_rows, gaps = _slot_rows((r_a, r_b), points[:C], s[:C], sigma[:C], slots[:, 1:3],
+    slot_rows, gaps = _slot_rows((r_a, r_b, theta_a, theta_a + turn), points[:C], s[:C], sigma[:C], slots[:, 1:3],
                                  theta_k[:C], kappa_k[:C], theta_at[:C], dtheta_at[:C], length, owns_start, owns_end,
-                                 setup, displacement, axis)
+                                 setup, displacement, axis, smooth)
     start_load = jnp.sum(every[:, 1:3] - F_node, axis=0) if setup.lumped else jnp.zeros(2)
     return (seg_rows, slot_rows, n_a - jnp.sum(F_node, axis=0), start_load, points[:C], gaps,
             (points[C:], theta_at[C:], dtheta_at[C:]))
@@ -199,8 +206,37 @@ def _cross2(u, v):
     return u[..., 0] * v[..., 1] - u[..., 1] * v[..., 0]
 
 
+def grad_at_ends(setup, ends, displacement, axis):
+    """[2, C] slope ∇φ·t of every obstacle's distance at the segment's start and end node."""
+    r_a, r_b, theta_a, theta_b = ends
+    rows = []
+    for r, theta in ((r_a, theta_a), (r_b, theta_b)):
+        t = jnp.stack([jnp.cos(theta), jnp.sin(theta)])
+        rows.append(jnp.stack([_signed_distance(setup, k, r, displacement, axis)[1] @ t for k in range(setup.n_obstacles)]))
+    return jnp.stack(rows)
+
+
+def _step(x):
+    x = jnp.clip(x, 0.0, 1.0)
+    return x * x * (3.0 - 2.0 * x)
+
+
+def handover_weight(s, slopes, owns_start, owns_end, smooth):
+    """Weight [C] of each slot's force.  A filament's tip and base count where the slot sits
+    on them (``owns_*``: not where anchored on the obstacle).  A node inside a filament is a
+    closest point only where the slope ∇φ·t vanishes there, and the force passes from the
+    segment that ends at it (weight g(slope) while its slot sits on the node) to the one that
+    starts there (1 − g(slope) near its start), g = 1 for slope ≥ 0 falling to 0 at −_HANDOVER:
+    the weights sum to one across the node, and the force is continuous."""
+    smooth_start, smooth_end = smooth
+    g = lambda slope: 1.0 - _step(-slope / _HANDOVER)  # noqa: E731
+    end = jnp.where(s >= 1.0, owns_end * jnp.where(smooth_end > 0, g(slopes[1]), 1.0), 1.0)
+    start = jnp.where(smooth_start > 0, 1.0 - g(slopes[0]) * (1.0 - _step(s / 0.25)), jnp.where(s <= 0.0, owns_start, 1.0))
+    return end * start
+
+
 def _slot_rows(ends, points, s, sigma, F, theta_k, kappa_k, theta_at, dtheta_at, length, owns_start, owns_end, setup,
-               displacement, axis):
+               displacement, axis, smooth=(0.0, 0.0)):
     """Rows [C, 5] of the slots (dimensionless) and their gaps [C] (µm)."""
     if setup.n_obstacles == 0:
         return jnp.zeros((0, SLOT_WIDTH)), jnp.zeros(0)
@@ -220,7 +256,7 @@ def _slot_rows(ends, points, s, sigma, F, theta_k, kappa_k, theta_at, dtheta_at,
     sphere = jnp.asarray([k == "sphere" for k in setup.kinds])
     radial = jnp.maximum(phi + setup.radii, 1e-300)
     bend = kappa_k * jnp.sum(grad * normal, axis=-1) + jnp.where(sphere, (1.0 - slope**2) / radial, 0.0)
-    end_phi = [[_signed_distance(setup, k, r, displacement, axis)[0] for k in range(setup.n_obstacles)] for r in ends]
+    end_phi = [[_signed_distance(setup, k, r, displacement, axis)[0] for k in range(setup.n_obstacles)] for r in ends[:2]]
     nearer = jnp.where(jnp.stack(end_phi[0]) <= jnp.stack(end_phi[1]), 0.0, 1.0)
     bias = _LOCATION_BIAS * jnp.clip(gaps / length, 0.0, 1.0) ** 2 * (sigma - 0.5)
     if setup.dense:  # pattern template: no projection, no ownership, force everywhere
@@ -231,19 +267,20 @@ def _slot_rows(ends, points, s, sigma, F, theta_k, kappa_k, theta_at, dtheta_at,
         # far from a plane the slot rests at the segment's middle (its force is 0 there
         # anyway): the closest-point rule, whose choice of branch may jump while a segment is
         # straight and parallel to the plane, takes over smoothly inside the band
-        # gap < max(10 δ, l/20) (of the segment's lowest possible gap).  A sphere's distance is curved along any segment (d²φ/ds² > 0
-        # near it): its rule holds everywhere (a band there moves the slot along a fold).
+        # gap < max(10 δ, l/20) of the segment's lowest possible gap.  A sphere's distance is
+        # curved along any segment (d²φ/ds² > 0 near it): its rule holds everywhere (a band
+        # there moves the slot along a fold).
         band = jnp.maximum(10.0 * setup.activation, 0.05 * length)
         # the band is tested on a lower bound of the segment's gap, not the gap at the current
         # σ (a slot resting at σ = ½ would not see an end of an inclined segment reach the
         # plane): every curve point lies within l/2 of the chord's midpoint (inextensible)
-        middle = 0.5 * (ends[0] + ends[1])
+        middle = 0.5 * (ends[0] + ends[1])  # (r_a + r_b) / 2
         lowest = jnp.stack([_signed_distance(setup, k, middle, displacement, axis)[0]
                             for k in range(setup.n_obstacles)]) - 0.5 * length - setup.filament_radius
         x = jnp.clip(2.0 * (band - lowest) / band, 0.0, 1.0)
         near = jnp.where(sphere, 1.0, x * x * (3.0 - 2.0 * x))
         location = near * closest + (1.0 - near) * (sigma - 0.5)
-        owned = jnp.where(s >= 1.0, owns_end, 1.0) * jnp.where(s <= 0.0, owns_start, 1.0)
+        owned = handover_weight(s, grad_at_ends(setup, ends, displacement, axis), owns_start, owns_end, smooth)
         magnitude = owned * penalty_force(gaps, setup.activation, setup.stiffness)
     force = (F - magnitude[:, None] * grad) / setup.force_scale
     rows = jnp.concatenate([location[:, None], force, (theta_k - theta_at)[:, None],
@@ -262,12 +299,12 @@ def contact_segment_rows(positions, angles, moments, m_start, forces, slots, net
 
     extra = jnp.zeros((network.n_segments, 0, SLOT_WIDTH)) if extra is None else extra
 
-    def one(end, n, length, EI, kappa0, slot, own_a, own_b, more):
+    def one(end, n, length, EI, kappa0, slot, own_a, own_b, more, smooth_a, smooth_b):
         return planar_contact_segment(end, n, length, EI, kappa0, slot, own_a, own_b, setup, control.displacement,
-                                      axis, quad, more)
+                                      axis, quad, more, (smooth_a, smooth_b))
 
     return jax.vmap(one)(ends, forces, network.lengths, network.EI, network.natural_curvature, slots,
-                         setup.owns_start, setup.owns_end, extra)
+                         setup.owns_start, setup.owns_end, extra, setup.smooth_start, setup.smooth_end)
 
 
 def initial_slots(network, setup: ContactSetup | None, angles) -> jax.Array:

@@ -77,7 +77,7 @@ class LawnModel(FitModel):
         ``seed`` and ``n_outcrops``.
     screen : None, or a probe travel (µm, below ``film_height``): keep only realisations
         that can be followed to it at the built loads — whose nodes do not cross the
-        substrate or the probe plane before (no contact model yet: such a path is not
+        substrate or the probe plane before (3D networks have no contact yet: such a path is not
         physical and a fit could not evaluate it). Seeds are drawn ``seed``, ``seed + 1``, …
         until ``n_outcrops`` pass (with ``seeds``: those of them that pass); the seeds
         refused are ``screened_out``. The lawn is then that of the screened population.

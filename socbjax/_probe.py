@@ -101,8 +101,9 @@ def surface_crossing(network: Network, positions, displacement):
     Heights h are measured from the probe's reference position along the probe direction;
     the surface is the plane h = gap of the farthest opposing support (:func:`probe_gap`),
     the probe plane h = u (probe displacement of the row).  ``positions`` [K, N, d] (µm),
-    ``displacement`` [K] (µm); numpy in, numpy out; JAX arrays (traced) in, JAX out.  Until
-    contact exists (no contact model yet) a crossing is a flagged status, never success."""
+    ``displacement`` [K] (µm); numpy in, numpy out; JAX arrays (traced) in, JAX out.
+    Computed without contact (``contact=None``; every 3D network so far) a crossing is a
+    flagged status, never success."""
     padded = network.padding is not None
     xp = jnp if padded or is_traced(positions, displacement) or isinstance(positions, jax.Array) else np
     origin, gap = probe_frame(network)
@@ -235,7 +236,8 @@ def observe(model, X, loads, U=None):
             outputs = (jnp.zeros((), jnp.int32), jnp.asarray(jnp.nan), jnp.zeros(()), empty, empty)
         else:
             points, gaps, F, counted, _ = model.contact_geometry(st, Control.make(1.0, u))
-            touching = counted & (gaps < contact.activation)  # the law's force is on
+            # the law's force is on (and not handed over to a neighbouring segment's slot)
+            touching = counted & (gaps < contact.activation) & (jnp.linalg.norm(F, axis=-1) > 1e-9 * contact.force_scale)
             F = jnp.where(touching[..., None], F, 0.0)  # not round-off of a zero force
             C = model.n_obstacles
             if C:

@@ -201,7 +201,7 @@ def socb_residual(state: SOCBState, network: Network, control: Control, frames: 
         loads = loads + jax.ops.segment_sum(start_loads, network.segments[:, 0], num_segments=network.n_nodes)
         if pair_frame is not None:
             slot_rows = jnp.concatenate([slot_rows.ravel(), pair_rows(state.pairs, pair_frame, at_pairs, network,
-                                                                      contact)[0].ravel()])
+                                                                      contact, (r, d))[0].ravel()])
     else:
         seg = _segment_rows(state, network, quad, frames, m_start)
     imbalance = routed_nodal_force(state.forces, network, loads, end_forces)
@@ -349,7 +349,7 @@ class SOCBModel(eqx.Module):
         out = (points.reshape(-1, 2), gaps.reshape(-1), state.contacts[..., 1:3].reshape(-1, 2), counted.reshape(-1))
         both = jnp.zeros((0, 2, 2))
         if frame is not None:
-            _, pair_gaps, both = pair_rows(state.pairs, frame, at_pairs, net, c)
+            _, pair_gaps, both = pair_rows(state.pairs, frame, at_pairs, net, c, (state.positions, state.directors))
             out = (jnp.concatenate([out[0], both[:, 0]]), jnp.concatenate([out[1], pair_gaps]),
                    jnp.concatenate([out[2], state.pairs[:, 4:6]]), jnp.concatenate([out[3], frame.ids[:, 0] >= 0]))
         return (*out, end_forces, both)

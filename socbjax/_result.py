@@ -36,7 +36,7 @@ class LimitPoint:
         displacement turns back: a snap-back, only on arclength paths) or "bifurcation"
         (sign(det J) changes without a fold: a critical point of the tangent stiffness), or
         "surface_crossing" (the first step with a node beyond the surface or behind the probe
-        plane; the result is then ``RESULTS.surface_crossed``: no contact model yet).
+        plane; the result is then ``RESULTS.surface_crossed``: computed without contact).
     step : index of the recorded step at (or just after) the event.
     displacement, force : probe displacement (µm) and force (pN) at that step.
     phase : "loading" or "unloading".

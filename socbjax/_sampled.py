@@ -227,7 +227,7 @@ def compress_at(model, displacement, at=None, *, unload=False, perturbation=None
     failed = ~jnp.all(converged) | (result == RESULTS.surface_crossed)
     if is_traced(out):
         return eqx.error_if(out, failed, "compress(at=...): a sampled equilibrium did not converge, lies beyond the "
-                            "path, or has nodes beyond the surface or the probe plane (no contact model yet)")
+                            "path, or has nodes beyond the surface or the probe plane (computed without contact)")
     if bool(failed) and bool(jnp.all(converged)):
         err = ConvergenceError(f"compress(at=...): {result_message(result)}")
         err.result = out

@@ -47,8 +47,9 @@ class RESULTS(optx.RESULTS):  # pyright: ignore
         "their mean), so the values mean nothing; check the curve's units, its contact point and the model"
     )
     surface_crossed = (
-        "nodes of the network crossed the surface or the probe plane: socbjax has no contact model yet, so filaments "
-        "pass through both, and the path from that step on is not physical; stop before it (a smaller displacement: "
+        "nodes of the network crossed the surface or the probe plane: computed without contact (contact=None), filaments "
+        "pass through both, and the path from that step on is not physical (planar networks: use "
+        "contact=socbjax.Contact(self_contact=False)); otherwise stop before it (a smaller displacement: "
         "see the 'surface_crossing' event in result.limit_points)"
     )
 

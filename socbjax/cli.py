@@ -20,7 +20,7 @@ from ._progress import plural  # stdlib only
 
 __all__ = ["main", "build_parser"]
 
-# Defaults stop before the first node crosses the surface (no contact model yet): the unit mesh's mother at
+# Defaults stop before the first node crosses the surface (no 3D contact yet): the unit mesh's mother at
 # u ≈ 0.44 µm, the default 8-generation outcrop (seed 0) at u ≈ 0.33 µm (both with actin's twist).
 _DEFAULT_DISPLACEMENT = {"unit-mesh": 0.35, "outcrop": 0.2, "column": None}
 # The column's supports (socbjax.SUPPORTS, here without importing the solver); its default is

@@ -154,6 +154,8 @@ def test_contact_input_errors_name_the_argument():
     assert sj.Contact().self_contact and sj.Contact().surfaces  # the contract's defaults
     with pytest.raises(ValueError, match="per_segment"):
         sj.Contact(per_segment=0)
+    with pytest.raises(ValueError, match="capacity"):
+        sj.Contact(capacity=0)
     with pytest.raises(NotImplementedError, match="3D"):
         sj.solve(sj.cantilever(3), forces={-1: [0, -1.0, 0]}, contact=sj.Contact(self_contact=False))
     with pytest.raises(ValueError, match="3D but the network is 2D"):
@@ -176,3 +178,78 @@ def test_a_tip_pressed_onto_a_wall_rests_on_it_and_the_forces_balance():
     slots = np.asarray(sol.state.contacts)[:, 0]
     assert slots[-1, 0] == 1.0 and slots[-1, 2] > 0.5  # at the tip (σ = 1), pushing up
     np.testing.assert_allclose(np.asarray(sol.reactions[0]) + load + slots[:, 1:3].sum(axis=0), 0.0, atol=1e-8)
+
+
+def _two_filaments():
+    """A cantilever (4 segments, EI 1) above a stiff filament (7 segments, EI 1e6) lying
+    0.12 µm below it, clamped at its left end and guided vertically at its right end."""
+    nA, nB = 5, 8
+    xa, xb = np.linspace(0, 1, nA), np.linspace(-0.1, 1.3, nB)
+    pos = np.concatenate([np.stack([xa, 0 * xa], 1), np.stack([xb, 0 * xb - 0.12], 1)])
+    seg = np.array([[i, i + 1] for i in range(nA - 1)] + [[nA + i, nA + i + 1] for i in range(nB - 1)])
+    lengths = np.linalg.norm(pos[seg[:, 1]] - pos[seg[:, 0]], axis=1)
+    EI_ = np.array([1.0] * (nA - 1) + [1e6] * (nB - 1))
+    fixed = ([np.eye(2)] + [np.zeros((0, 2))] * (nA - 1) + [np.eye(2)] + [np.zeros((0, 2))] * (nB - 2)
+             + [np.array([[0.0, 1.0]])])
+    clamped = np.zeros(nA + nB, bool)
+    clamped[[0, nA]] = True
+    return sj.make_network(pos, np.tile([1.0, 0.0], (nA + nB, 1)), seg, lengths, EI_, fixed_directions=fixed,
+                           clamped=clamped), nA - 1
+
+
+def test_filament_on_a_stiff_filament_matches_the_same_filament_on_a_wall():
+    """Filament–filament contact (pair slots, broad phase) against the validated wall
+    contact: a stiff filament under a cantilever acts as a plane d/2 above its axis."""
+    net, tip = _two_filaments()
+    load = np.array([0.0, -3.0])
+    pair = sj.solve(net, forces={tip: load}, contact=sj.Contact(diameter=D, surfaces=False, stiffness=1e6))
+    wall = sj.Plane([0.0, -0.12 + D / 2], [0.0, 1.0])
+    plane = sj.solve(sj.cantilever(5, length=L, EI=EI, dim=2), forces={-1: load},
+                     contact=sj.Contact(diameter=D, planes=(wall,), self_contact=False, surfaces=False, stiffness=1e6))
+    assert float(plane.positions[-1, 1]) > -0.12  # the wall holds the tip up
+    np.testing.assert_allclose(np.asarray(pair.positions[tip]), np.asarray(plane.positions[-1]), atol=1e-6)
+
+
+def _lobe_gap(k):
+    """Axis distance (µm) between the two lobes of the clamped–clamped elastica of modulus k
+    (L = 1): twice the gap between the middle's x and the first point where θ = 90°."""
+    from scipy.special import ellipeinc, ellipj, ellipkinc
+
+    m = k * k
+    lam = 4 * ellipk(m) / L
+
+    def x(s):
+        return 2 / lam * ellipeinc(ellipj(lam * s, m)[3], m) - s
+
+    s1 = ellipkinc(np.arcsin(1 / (np.sqrt(2) * k)), m) / lam
+    return 2 * (x(L / 2) - x(s1))
+
+
+def _elastica_shortening(k):
+    return 2 * L * (1 - ellipe(k * k) / ellipk(k * k))
+
+
+@pytest.mark.slow
+def test_clamped_column_self_contact_follows_the_elastica_then_departs():
+    """Clamped–clamped column (16 segments, d = 0.01 L): until its lobes touch, the gap
+    between them is the elliptic-integral elastica's (zero-thickness touch at Δ/L = 0.8487);
+    then the force departs from the contact-free curve and nothing interpenetrates.
+    Slow: about a minute (dense solver, ~200 path steps)."""
+    assert abs(_elastica_shortening(brentq(lambda k: _lobe_gap(k), 0.75, 0.9999)) - 0.8487) < 1e-4
+    net = sj.column(17, length=L, EI=EI, dim=2, supports=("clamped", "clamped"))
+    res = sj.compress(net, 0.86, contact=sj.Contact(diameter=D, surfaces=False), throw=False, method="arclength")
+    free = sj.compress(net, 0.86, method="arclength", throw=False)  # without contact its lobes pass through
+    U, gap, F = np.asarray(res.displacement), np.asarray(res.min_gap), np.asarray(res.force)
+    assert res.completed and np.all(gap[np.isfinite(gap)] > -0.01 * D)
+    onset = _elastica_shortening(brentq(lambda k: _lobe_gap(k) - D - D / 10, 0.75, 0.9999))
+    close = (gap < 0.02) & (U < onset - 2e-3)
+    assert close.sum() >= 2
+    for u, g in zip(U[close], gap[close]):
+        k = brentq(lambda k: _elastica_shortening(k) - u, 0.5, 0.9999)
+        assert abs(g - (_lobe_gap(k) - D)) < 1e-3
+    before = np.flatnonzero((U > 0.05) & (U < onset - 2e-3))[::10]
+    exact = sj.compress(net, 0.86, at=U[before], method="arclength", throw=False)  # contact-free, at the same u
+    np.testing.assert_allclose(F[before], np.asarray(exact.force), rtol=1e-6)
+    f_free = np.interp(U, np.asarray(free.displacement), np.asarray(free.force))
+    after = U > onset + 5e-3
+    assert after.any() and np.all(F[after] > f_free[after] + 1.0) and np.all(np.asarray(res.contact_count)[after] >= 1)
