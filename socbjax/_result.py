@@ -157,6 +157,11 @@ class CompressionResult(eqx.Module):
     def solution(self, i: int) -> Solution:
         """Row ``i`` as a :class:`socbjax.Solution` (curve, end rotations, deflection, reactions)."""
         net = self.network
+        if np.shape(self.contact_points)[1]:
+            raise ValueError("CompressionResult.solution: this path was computed with contact, and its equilibria need "
+                             "the contact slots (interior forces), which the result does not store; use the recorded "
+                             "positions, moments, contact_points and contact_forces, or solve the state you need with "
+                             "socbjax.solve(..., contact=...)")
         if not self.records_frame_angles:
             raise ValueError("CompressionResult.solution: this result of a twisting network has no material-frame "
                              "angles (read from a file of format 3 or older, which did not record them); solve the "

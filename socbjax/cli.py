@@ -123,8 +123,8 @@ def _add_simulate(sub) -> None:
         "--contact",
         action=argparse.BooleanOptionalAction,
         default=False,
-        help="contact with the probe face and the substrate (rigid frictionless planes; planar networks, --dim 2, "
-        "so far; filament–filament contact is not built yet) (default: --no-contact)",
+        help="contact with the probe face and the substrate (rigid frictionless planes) and between filaments "
+        "(planar networks, --dim 2, so far) (default: --no-contact)",
     )
     sim.add_argument("--diameter", type=float, default=0.007, help="filament diameter for --contact in µm (default 0.007)")
     sim.add_argument("--resume", action="store_true", help="continue an interrupted run from OUT.ckpt.h5")
@@ -336,7 +336,7 @@ def _simulate(args) -> int:
             checkpoint=sj.Checkpoint(checkpoint, every=args.checkpoint_every, resume=args.resume and checkpoint.exists()),
             throw=False,
             parameters=params,
-            contact=sj.Contact(diameter=args.diameter, self_contact=False) if args.contact else None,
+            contact=sj.Contact(diameter=args.diameter) if args.contact else None,
         )
         sj.save(result, out)
         if checkpoint.exists():  # the path ended (whatever its result): a resume would only repeat it

@@ -138,6 +138,8 @@ def test_channel_column_departs_from_the_elastica_at_the_wall(tmp_path):
     for name in ("contact_count", "min_gap", "contact_force", "contact_points", "contact_forces"):
         np.testing.assert_array_equal(np.asarray(getattr(back, name)), np.asarray(getattr(res, name)))
     assert back.parameters["contact"]["planes"][1]["normal"] == [0.0, -1.0]
+    with pytest.raises(ValueError, match="contact slots"):
+        back.solution(1)
     fig = sj.plot_force_curve(back)
     assert any(a.get_ylabel() == "contacts carrying force" for a in fig.axes)
     assert "contacts" in [t.get_text() for t in sj.plot_snapshots(back).legends[0].get_texts()]

@@ -142,7 +142,7 @@ def test_contact_block_runs_and_keeps_the_column_inside_the_channel():
     """The README's contact block: the column reaches the wall (contacts carry force at the
     end) and never crosses it (gap ≥ −1 % of d); its figures have the contact-count axis."""
     scope = {}
-    exec(compile(python_block("## Contact with walls, obstacles and the probe"), "README.md", "exec"), scope)
+    exec(compile(python_block("## Contact with walls, obstacles, the probe and other filaments"), "README.md", "exec"), scope)
     res = scope["result"]
     assert res.completed and int(res.contact_count[-1]) >= 1 and float(res.contact_force[-1]) > 0
     assert np.all(np.asarray(res.min_gap) > -0.01 * 0.01)
