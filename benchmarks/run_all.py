@@ -34,6 +34,7 @@ SCRIPTS = [
     "thermal_compression_3d",
     "twist_unit_mesh",
     "twist_outcrop",
+    "contact_planar",
     "peers/elastica_comparison",  # PyElastica columns only with the extra socbjax[peers]
 ]
 

@@ -106,9 +106,10 @@ class Contact(eqx.Module):
         not share a node: other filaments and the same one), found by a fixed-capacity
         spatial-hash broad phase (:mod:`socbjax._contact_pairs`); uses the dense linear
         solver (the pairs change the Jacobian's pattern).
-    capacity : pair slots (default max(16, 2 S) for S segments); more candidates stop the path
+    capacity : pair slots (default max(8, S) for S segments); more candidates stop the path
         with ``RESULTS.contact_capacity``.
-    per_segment : most pairs per segment and segments per hash cell (default 8).
+    per_segment : most pairs per segment (default 4; a hash cell holds up to twice as many
+        segments).  Each adds an interior force to every segment's kernel: keep it small.
     reach : µm beyond touching at which a pair enters the list (default max(l/4, 20 δ), l the
         mean segment length); a path step may move no segment farther than reach/2.
     surfaces : add the probe face (moving with the probe) and the substrate (the plane of the
@@ -135,11 +136,11 @@ class Contact(eqx.Module):
     force_limit: float | None = None
     lumped: bool = False
     capacity: int | None = None
-    per_segment: int = 8
+    per_segment: int = 4
     reach: float | None = None
 
     def __init__(self, diameter=DEFAULT_DIAMETER, planes=(), self_contact=True, surfaces=True, *, obstacles=(),
-                 activation=None, stiffness=None, force_limit=None, lumped=False, capacity=None, per_segment=8,
+                 activation=None, stiffness=None, force_limit=None, lumped=False, capacity=None, per_segment=4,
                  reach=None):
         self.diameter = check_real("Contact diameter", diameter, "µm", low=0.0, traced_ok=False)
         self.planes = _obstacles("planes", planes, Plane)

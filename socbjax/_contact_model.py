@@ -95,7 +95,7 @@ def contact_setup(network: Network, contact: Contact | None, *, dense: bool = Fa
     delta, k = contact.law(EI)
     f = lambda v: jnp.asarray(v, jnp.float64)  # noqa: E731
     S = network.n_segments
-    capacity = (max(16, 2 * S) if contact.capacity is None else contact.capacity) if contact.self_contact else 0
+    capacity = (max(8, S) if contact.capacity is None else contact.capacity) if contact.self_contact else 0
     reach = jnp.maximum(0.25 * length, 20.0 * delta) if contact.reach is None else contact.reach
     return ContactSetup(kinds=kinds, points=f(points), normals=f(normals), radii=f(radii), moving=f(moving),
                         owns_start=f(owns_start), owns_end=f(owns_end), filament_radius=f(contact.diameter / 2),

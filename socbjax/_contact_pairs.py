@@ -10,7 +10,7 @@ Broad phase (a spatial hash, jax-md style, fixed capacity): a segment's curve li
 circle of radius l/2 around its chord's midpoint (inextensible: |p − a| + |p − b| ≤ l for every
 point p, an ellipse inside that circle).  Segments are hashed to square cells of side
 max l + d + reach; each segment looks at its own and the 8 neighbouring cells (at most
-``per_segment`` segments per cell) and keeps partners j > i whose circles come within d + reach
+2 ``per_segment`` segments per cell) and keeps partners j > i whose circles come within d + reach
 (``reach``: how far the next path step may move a segment, enforced by the path's
 admissibility test).  Segments sharing a node never pair.  The list is rebuilt from the state
 before every path step (:meth:`socbjax.SOCBModel.frames`): pairs still in range keep their
@@ -77,7 +77,7 @@ def _keys(q):
     return key
 
 
-def broad_phase(centers, radii, reach, adjacent, capacity: int, per_segment: int):
+def broad_phase(centers, radii, reach, adjacent, capacity: int, per_cell: int):
     """(ids [capacity, 2] (−1 empty), overflow) of the segment pairs whose bounding circles
     (centers [S, d] µm, radii [S] µm) come within ``reach`` µm, from a spatial hash."""
     S, d = centers.shape
@@ -90,8 +90,8 @@ def broad_phase(centers, radii, reach, adjacent, capacity: int, per_segment: int
     near = _keys(q[:, None, :] + offsets[None])  # [S, O]
     start = jnp.searchsorted(sorted_keys, near, side="left")
     stop = jnp.searchsorted(sorted_keys, near, side="right")
-    crowded = jnp.any(stop - start > per_segment)
-    idx = start[..., None] + jnp.arange(per_segment)  # [S, O, M]
+    crowded = jnp.any(stop - start > per_cell)
+    idx = start[..., None] + jnp.arange(per_cell)  # [S, O, M]
     j = order[jnp.clip(idx, 0, S - 1)]
     i = jnp.broadcast_to(jnp.arange(S)[:, None, None], j.shape)
     dist = jnp.linalg.norm(centers[i] - centers[j], axis=-1)

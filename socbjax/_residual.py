@@ -316,7 +316,7 @@ class SOCBModel(eqx.Module):
             r = jax.lax.stop_gradient(state.positions)
             a, b = net.segments[:, 0], net.segments[:, 1]
             found, overflow = broad_phase(0.5 * (r[a] + r[b]), 0.5 * net.lengths, 2.0 * c.filament_radius + c.reach,
-                                          c.adjacent, c.capacity, c.per_segment)
+                                          c.adjacent, c.capacity, 2 * c.per_segment)
             ids = merge_pairs(ids, found, net.n_segments)
         table, crowded = segment_table(ids, net.n_segments, c.per_segment)
         return PairList(ids=ids, table=table, overflow=overflow | crowded)

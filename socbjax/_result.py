@@ -69,8 +69,10 @@ class CompressionResult(eqx.Module):
     end_forces : [K, E] axial force on each strand end (pN, compressive positive).
     iterations : [K] Newton iterations of each step.
     contact_count : [K] int, contacts carrying force (0 without contact).
-    min_gap : [K] smallest surface-to-surface gap between a filament and an obstacle (µm;
-        negative = penetration; NaN without contact).
+    min_gap : [K] smallest surface-to-surface gap of the contact slots (µm; negative =
+        penetration; NaN without contact).  Exact (the closest points of the smooth curves)
+        for slots near contact (within max(10 δ, l/20)); farther, a slot rests at its
+        segment's middle and its gap is an upper bound.
     contact_force : [K] sum of the contact force magnitudes (pN; 0 without contact).
     contact_points, contact_forces : [K, c, d] the c = S·C contact slots' points (µm) and
         forces on the filament (pN; zero where not in contact); c = 0 without contact.
