@@ -236,7 +236,7 @@ def test_clamped_column_self_contact_follows_the_elastica_then_departs():
     """Clamped–clamped column (16 segments, d = 0.01 L): until its lobes touch, the gap
     between them is the elliptic-integral elastica's (zero-thickness touch at Δ/L = 0.8487);
     then the force departs from the contact-free curve and nothing interpenetrates.
-    Slow: about a minute (dense solver, ~200 path steps)."""
+    Slow: about 25 s (dense solver, ~170 path steps)."""
     assert abs(_elastica_shortening(brentq(lambda k: _lobe_gap(k), 0.75, 0.9999)) - 0.8487) < 1e-4
     net = sj.column(17, length=L, EI=EI, dim=2, supports=("clamped", "clamped"))
     res = sj.compress(net, 0.86, contact=sj.Contact(diameter=D, surfaces=False), throw=False, method="arclength")
@@ -255,3 +255,12 @@ def test_clamped_column_self_contact_follows_the_elastica_then_departs():
     f_free = np.interp(U, np.asarray(free.displacement), np.asarray(free.force))
     after = U > onset + 5e-3
     assert after.any() and np.all(F[after] > f_free[after] + 1.0) and np.all(np.asarray(res.contact_count)[after] >= 1)
+
+
+def test_more_pairs_than_the_capacity_stop_the_path_and_say_so():
+    net, tip = _two_filaments()
+    small = sj.Contact(diameter=D, surfaces=False, stiffness=1e6, capacity=1)
+    sol = sj.solve(net, forces={tip: np.array([0.0, -3.0])}, contact=small, throw=False)
+    assert sol.result == sj.RESULTS.contact_capacity
+    with pytest.raises(sj.ConvergenceError, match="capacity"):
+        sj.solve(net, forces={tip: np.array([0.0, -3.0])}, contact=small)
