@@ -152,6 +152,9 @@ class Contact(eqx.Module):
         self.stiffness = opt("stiffness", stiffness, "pN/µm")
         self.force_limit = opt("force_limit", force_limit, "pN")
         self.lumped = check_bool("lumped", lumped)
+        if self.lumped and self.self_contact:
+            raise ValueError("lumped=True (a comparison of obstacle contact) needs self_contact=False; got "
+                             "self_contact=True")
         self.capacity = None if capacity is None else check_int("capacity", capacity, minimum=1, maximum=10**6)
         self.per_segment = check_int("per_segment", per_segment, minimum=1, maximum=1024)
         self.reach = opt("reach", reach, "µm")

@@ -328,9 +328,9 @@ class SOCBModel(eqx.Module):
         """Contact slots of ``state`` (2D contact models): (points [c, 2] µm, gaps [c] µm,
         forces on the filament [c, 2] pN, counted [c] bool, end forces [S, 2] pN) over the
         c = S·C obstacle slots, then the P pair slots (their point on segment i; force on i).
-        A slot is not counted where its point is a node that another segment owns or that is
-        anchored on the obstacle (a probe tip on the probe face), nor where a pair slot is
-        empty."""
+        A slot is not counted where it sits on the start node of a segment inside a filament
+        (the segment ending there reports that point) or on a node anchored on the obstacle
+        (a probe tip on the probe face), nor where a pair slot is empty."""
         return self._contact_parts(state, Control.make() if control is None else control)[:5]
 
     def _contact_parts(self, state: SOCBState, control: Control):
@@ -359,9 +359,11 @@ class SOCBModel(eqx.Module):
         through a sphere or point obstacle or through another segment (a plane cannot be
         crossed unseen: the gap turns negative): each curve point of a segment moves by at
         most D = max |Δr| at its nodes + l · max |Δθ| along it (taken as 1.5 × the larger nodal
-        turn), and a segment whose axis was φ from a surface cannot reach it if D < φ (pairs:
-        D_i + D_j < axis distance; pairs not in the list are farther than ``reach`` apart, so
-        2 max D < reach).  Overflow: the new state has more candidate pairs than the capacity."""
+        turn), and a segment whose axis was φ from a sphere cannot reach it if D < φ.  A listed
+        pair that may have come closer (D_i + D_j ≥ its axis distance) must still have its
+        closest points on the same sides of each other; pairs not in the list are farther than
+        ``reach`` apart, so 2 max D < reach.  Overflow: the new state has more candidate pairs
+        than the capacity (``RESULTS.contact_capacity``)."""
         c = self.contact
         if c is None or ("sphere" not in c.kinds and not self.n_pairs):
             return jnp.asarray(True), jnp.asarray(False)

@@ -158,6 +158,8 @@ def test_contact_input_errors_name_the_argument():
         sj.Contact(per_segment=0)
     with pytest.raises(ValueError, match="capacity"):
         sj.Contact(capacity=0)
+    with pytest.raises(ValueError, match="self_contact=False"):
+        sj.Contact(lumped=True)
     with pytest.raises(NotImplementedError, match="3D"):
         sj.solve(sj.cantilever(3), forces={-1: [0, -1.0, 0]}, contact=sj.Contact(self_contact=False))
     with pytest.raises(ValueError, match="3D but the network is 2D"):
