@@ -26,11 +26,10 @@ import time
 
 import _common  # noqa: F401  (sets OPENBLAS_NUM_THREADS before numpy loads)
 import numpy as np
-from scipy.integrate import solve_ivp
-from scipy.optimize import brentq, fsolve
-from scipy.special import ellipe, ellipeinc, ellipj, ellipk, ellipkinc
+from scipy.optimize import brentq
 
 import socbjax as sj
+from socbjax.testing import clamped_elastica_lobe_gap, elastica_end_shortening, elastica_on_point_obstacle
 
 L, EI, D = 1.0, 1.0, 0.01
 TIP, OBSTACLE = np.array([0.0, -3.0]), np.array([0.6, -0.12])
@@ -42,37 +41,14 @@ def obstacle_solve(n_segments: int, lumped: bool):
     return sj.solve(sj.cantilever(n_segments + 1, length=L, EI=EI, dim=2), forces={-1: TIP}, contact=contact)
 
 
-def shooting(guess):
-    """(tip [x, y, θ], contact arc length s_c) of the elastica on the obstacle."""
-    delta, k = sj.Contact(diameter=D).law(EI)
-    opts = dict(rtol=1e-13, atol=1e-14, method="DOP853")
-
-    def rhs(s, y, n):
-        return [np.cos(y[2]), np.sin(y[2]), y[3] / EI, -(np.cos(y[2]) * n[1] - np.sin(y[2]) * n[0])]
-
-    def legs(z):
-        m0, sc, lam, phi = z
-        a = solve_ivp(rhs, (0, sc), [0, 0, 0, m0], args=(TIP + lam * np.array([np.cos(phi), np.sin(phi)]),),
-                      **opts).y[:, -1]
-        return a, solve_ivp(rhs, (sc, L), a, args=(TIP,), **opts).y[:, -1]
-
-    def equations(z):
-        a, b = legs(z)
-        r, t = a[:2], np.array([np.cos(a[2]), np.sin(a[2])])
-        gap = np.linalg.norm(r - OBSTACLE) - D / 2
-        return [b[3], (r - OBSTACLE) @ t, z[2] - k * delta / 3 * max(1 - gap / delta, 0) ** 3,
-                np.arctan2(*(r - OBSTACLE)[::-1]) - z[3]]
-
-    z = fsolve(equations, guess, xtol=1e-14)
-    return legs(z)[1][:3], z[1]
-
-
 def part_a(segments) -> dict:
     sol = obstacle_solve(4, False)
     slots = np.asarray(sol.state.contacts)[:, 0]
     j = int(np.argmax(np.linalg.norm(slots[:, 1:3], axis=1)))
-    tip, sc = shooting([float(sol.moments[0]), (j + slots[j, 0]) / 4, np.linalg.norm(slots[j, 1:3]),
-                        np.arctan2(slots[j, 2], slots[j, 1])])
+    ref = elastica_on_point_obstacle(TIP, OBSTACLE, D, sj.Contact(diameter=D).law(EI),
+                                     [float(sol.moments[0]), (j + slots[j, 0]) / 4, np.linalg.norm(slots[j, 1:3]),
+                                      np.arctan2(slots[j, 2], slots[j, 1])], length=L, EI=EI)
+    tip, sc = ref["tip"], ref["contact_s"]
     rows = []
     for n in segments:
         errors = [float(np.abs(np.asarray(obstacle_solve(n, lumped).positions[-1]) - tip[:2]).max())
@@ -82,19 +58,9 @@ def part_a(segments) -> dict:
     return {"reference_tip_um": tip[:2].tolist(), "contact_s_um": float(sc), "rows": rows}
 
 
-def lobe_gap(k: float) -> float:
-    """Axis distance (µm) between the lobes of the clamped–clamped elastica of modulus k."""
-    m = k * k
-    lam = 4 * ellipk(m) / L
-
-    def x(s):
-        return 2 / lam * ellipeinc(ellipj(lam * s, m)[3], m) - s
-
-    return 2 * (x(L / 2) - x(ellipkinc(np.arcsin(1 / (np.sqrt(2) * k)), m) / lam))
-
-
-def shortening(k: float) -> float:
-    return 2 * L * (1 - ellipe(k * k) / ellipk(k * k))
+def elastica_gap(u: float) -> float:
+    """Surface-to-surface gap (µm) between the elastica's lobes at end shortening u (µm)."""
+    return clamped_elastica_lobe_gap(brentq(lambda k: elastica_end_shortening(k) - u, 0.5, 0.9999)) - D
 
 
 def timed(net, U, contact):
@@ -110,15 +76,15 @@ def part_b(U: float) -> dict:
     res, wall = timed(net, U, sj.Contact(diameter=D, surfaces=False))
     first = time.perf_counter() - t0 - wall
     free, wall_free = timed(net, U, None)
-    touch = shortening(brentq(lambda k: lobe_gap(k), 0.75, 0.9999))
-    onset = shortening(brentq(lambda k: lobe_gap(k) - D - D / 10, 0.75, 0.9999))
+    touch = elastica_end_shortening(brentq(lambda k: clamped_elastica_lobe_gap(k), 0.75, 0.9999))
+    onset = elastica_end_shortening(brentq(lambda k: clamped_elastica_lobe_gap(k) - D - D / 10, 0.75, 0.9999))
     u, gap, F = (np.asarray(a) for a in (res.displacement, res.min_gap, res.force))
     # min_gap is the closest-point gap once a pair is within its band (max(10 δ, l/20) of its
     # lowest possible gap), the gap at the slot's resting point before: compare from 0.02 µm
     close = np.isfinite(gap) & (gap < 0.02) & (u < onset - 2e-3)
-    elastica = np.array([lobe_gap(brentq(lambda k: shortening(k) - v, 0.5, 0.9999)) - D for v in u[close]])
+    elastica = np.array([elastica_gap(v) for v in u[close]])
     u_line = np.linspace(0.76, onset, 60)
-    line = np.array([lobe_gap(brentq(lambda k: shortening(k) - v, 0.5, 0.9999)) - D for v in u_line])
+    line = np.array([elastica_gap(v) for v in u_line])
     f_free = np.interp(u, np.asarray(free.displacement), np.asarray(free.force))
     print(f"  self-contact: {res.summary()}", flush=True)
     return {"touch_zero_thickness": touch, "onset_elastica": onset, "status": res.status_message.split(":")[0],

@@ -5,12 +5,12 @@ contact=None keeps the contact-free model."""
 
 import numpy as np
 import pytest
-from scipy.integrate import solve_ivp
-from scipy.optimize import brentq, fsolve
+from scipy.optimize import brentq
 from scipy.special import ellipe, ellipk
 
 import jax
 import socbjax as sj
+from socbjax.testing import clamped_elastica_lobe_gap, elastica_end_shortening, elastica_on_point_obstacle
 
 L, EI, D = 1.0, 1.0, 0.01
 TIP = np.array([0.0, -3.0])  # pN, pushes the cantilever onto the obstacle
@@ -26,34 +26,11 @@ def _solve_on_obstacle(n_segments, EI=EI, **kw):
     return sj.solve(net, forces={-1: TIP}, contact=_obstacle_contact(**kw))
 
 
-def _rhs(s, y, n):
-    theta, m = y[2], y[3]
-    return [np.cos(theta), np.sin(theta), m / EI, -(np.cos(theta) * n[1] - np.sin(theta) * n[0])]
-
-
 def _shooting(guess):
-    """Independent reference: the Kirchhoff elastica integrated (DOP853, rtol 1e-13) from the
-    clamp to the tip with the internal force jumping by the contact force at s_c, where the
-    axis is closest to the obstacle and the force follows the same law f(gap)."""
-    delta, k = _obstacle_contact().law(EI)
-    opts = dict(rtol=1e-13, atol=1e-14, method="DOP853")
-
-    def legs(z):
-        m0, sc, lam, phi = z
-        Fc = lam * np.array([np.cos(phi), np.sin(phi)])
-        a = solve_ivp(_rhs, (0, sc), [0, 0, 0, m0], args=(TIP + Fc,), **opts).y[:, -1]
-        return a, solve_ivp(_rhs, (sc, L), a, args=(TIP,), **opts).y[:, -1]
-
-    def equations(z):
-        a, b = legs(z)
-        r, t = a[:2], np.array([np.cos(a[2]), np.sin(a[2])])
-        gap = np.linalg.norm(r - OBSTACLE) - D / 2
-        return [b[3], (r - OBSTACLE) @ t, z[2] - k * delta / 3 * max(1 - gap / delta, 0) ** 3,
-                np.arctan2(*(r - OBSTACLE)[::-1]) - z[3]]
-
-    z, _, ok, msg = fsolve(equations, guess, xtol=1e-14, full_output=True)
-    assert ok in (1, 3) and np.abs(equations(z)).max() < 1e-11, msg  # 3: converged to round-off
-    return z, legs(z)[1]
+    """Independent reference (socbjax.testing): the elastica integrated across the force jump
+    at the contact point, with the same contact law."""
+    out = elastica_on_point_obstacle(TIP, OBSTACLE, D, _obstacle_contact().law(EI), guess, length=L, EI=EI)
+    return (out["contact_s"], out["force"]), out["tip"]
 
 
 @pytest.fixture(scope="module")
@@ -67,7 +44,7 @@ def reference():
 
 
 def test_mid_segment_point_force_matches_shooting(reference):
-    (m0, sc, lam, phi), tip = reference
+    (sc, lam), tip = reference
     assert 0.05 < (sc * 4) % 1 < 0.95  # the contact lies inside a segment, not at a node
     sol = _solve_on_obstacle(4)
     assert np.abs(np.asarray(sol.positions[-1]) - tip[:2]).max() < 1e-6
@@ -214,43 +191,24 @@ def test_filament_on_a_stiff_filament_matches_the_same_filament_on_a_wall():
     np.testing.assert_allclose(np.asarray(pair.positions[tip]), np.asarray(plane.positions[-1]), atol=1e-6)
 
 
-def _lobe_gap(k):
-    """Axis distance (µm) between the two lobes of the clamped–clamped elastica of modulus k
-    (L = 1): twice the gap between the middle's x and the first point where θ = 90°."""
-    from scipy.special import ellipeinc, ellipj, ellipkinc
-
-    m = k * k
-    lam = 4 * ellipk(m) / L
-
-    def x(s):
-        return 2 / lam * ellipeinc(ellipj(lam * s, m)[3], m) - s
-
-    s1 = ellipkinc(np.arcsin(1 / (np.sqrt(2) * k)), m) / lam
-    return 2 * (x(L / 2) - x(s1))
-
-
-def _elastica_shortening(k):
-    return 2 * L * (1 - ellipe(k * k) / ellipk(k * k))
-
-
 @pytest.mark.slow
 def test_clamped_column_self_contact_follows_the_elastica_then_departs():
     """Clamped–clamped column (16 segments, d = 0.01 L): until its lobes touch, the gap
     between them is the elliptic-integral elastica's (zero-thickness touch at Δ/L = 0.8487);
     then the force departs from the contact-free curve and nothing interpenetrates.
     Slow: about 25 s (dense solver, ~170 path steps)."""
-    assert abs(_elastica_shortening(brentq(lambda k: _lobe_gap(k), 0.75, 0.9999)) - 0.8487) < 1e-4
+    assert abs(elastica_end_shortening(brentq(lambda k: clamped_elastica_lobe_gap(k), 0.75, 0.9999)) - 0.8487) < 1e-4
     net = sj.column(17, length=L, EI=EI, dim=2, supports=("clamped", "clamped"))
     res = sj.compress(net, 0.86, contact=sj.Contact(diameter=D, surfaces=False), throw=False, method="arclength")
     free = sj.compress(net, 0.86, method="arclength", throw=False)  # without contact its lobes pass through
     U, gap, F = np.asarray(res.displacement), np.asarray(res.min_gap), np.asarray(res.force)
     assert res.completed and np.all(gap[np.isfinite(gap)] > -0.01 * D)
-    onset = _elastica_shortening(brentq(lambda k: _lobe_gap(k) - D - D / 10, 0.75, 0.9999))
+    onset = elastica_end_shortening(brentq(lambda k: clamped_elastica_lobe_gap(k) - D - D / 10, 0.75, 0.9999))
     close = (gap < 0.02) & (U < onset - 2e-3)
     assert close.sum() >= 2
     for u, g in zip(U[close], gap[close]):
-        k = brentq(lambda k: _elastica_shortening(k) - u, 0.5, 0.9999)
-        assert abs(g - (_lobe_gap(k) - D)) < 1e-3
+        k = brentq(lambda k: elastica_end_shortening(k) - u, 0.5, 0.9999)
+        assert abs(g - (clamped_elastica_lobe_gap(k) - D)) < 1e-3
     before = np.flatnonzero((U > 0.05) & (U < onset - 2e-3))[::10]
     exact = sj.compress(net, 0.86, at=U[before], method="arclength", throw=False)  # contact-free, at the same u
     np.testing.assert_allclose(F[before], np.asarray(exact.force), rtol=1e-6)
