@@ -46,16 +46,25 @@ def _obstacle_table(network: Network, contact: Contact):
     return tuple(kinds), stack(points), stack(normals), jnp.asarray(radii, jnp.float64), jnp.asarray(moving, jnp.float64)
 
 
-def _ownership(network: Network, kinds, points, normals, radii):
+def _segment_roles(network: Network) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """[S] each, 1 where: the segment's start node is a filament base (not the end of another
+    segment, not a daughter base: it owns that point); another segment ends at its start node;
+    another segment starts at its end node (the filament goes on smoothly through those nodes;
+    a daughter's base is a corner)."""
+    seg, attach = np.asarray(network.segments), np.asarray(network.attach)
+    is_end, is_start = np.zeros(network.n_nodes, bool), np.zeros(network.n_nodes, bool)
+    is_end[seg[:, 1]], is_start[seg[:, 0]] = True, True
+    free_base = ~is_end & (attach == np.arange(network.n_nodes))
+    return free_base[seg[:, 0]].astype(float), is_end[seg[:, 0]].astype(float), is_start[seg[:, 1]].astype(float)
+
+
+def _ownership(network: Network, kinds, points, normals, radii, free_base):
     """(owns_start, owns_end) [S, C]: every node's point belongs to one segment (the one that
     ends there; a filament's base to the segment that starts there; a daughter base to its
-    mother's segment), and a supported node on an obstacle's surface to none."""
+    mother's segment), and a supported node on an obstacle's surface to none.  ``free_base``:
+    [S] from :func:`_segment_roles`."""
     seg = np.asarray(network.segments)
     n_nodes = network.n_nodes
-    attach = np.asarray(network.attach)
-    is_end = np.zeros(n_nodes, bool)
-    is_end[seg[:, 1]] = True
-    free_base = ~is_end & (attach == np.arange(n_nodes))
     pos = jnp.asarray(network.positions)  # traced under jit: ownership is data, not structure
     P = jnp.asarray(network.position_projector)
     columns = []
@@ -67,7 +76,7 @@ def _ownership(network: Network, kinds, points, normals, radii):
         else:
             columns.append(jnp.abs(jnp.linalg.norm(pos - points[k], axis=1) - radii[k]) < ANCHOR_TOLERANCE)
     anchored = jnp.stack(columns, axis=1) if columns else jnp.zeros((n_nodes, 0), bool)
-    owns_start = jnp.asarray(free_base)[seg[:, 0], None] & ~anchored[seg[:, 0]]
+    owns_start = (jnp.asarray(free_base)[:, None] > 0) & ~anchored[seg[:, 0]]
     owns_end = ~anchored[seg[:, 1]]
     return owns_start.astype(jnp.float64), owns_end.astype(jnp.float64)
 
@@ -90,7 +99,8 @@ def contact_setup(network: Network, contact: Contact | None, *, dense: bool = Fa
             raise ValueError(f"contact obstacle {i} is {obstacle.dim}D but the network is {network.dim}D; give points "
                              f"and normals with {network.dim} components")
     kinds, points, normals, radii, moving = _obstacle_table(network, contact)
-    owns_start, owns_end = _ownership(network, kinds, points, normals, radii)
+    free_base, smooth_start, smooth_end = _segment_roles(network)
+    owns_start, owns_end = _ownership(network, kinds, points, normals, radii, free_base)
     EI, length = jnp.mean(network.EI), jnp.mean(network.lengths)
     delta, k = contact.law(EI)
     f = lambda v: jnp.asarray(v, jnp.float64)  # noqa: E731
@@ -100,25 +110,7 @@ def contact_setup(network: Network, contact: Contact | None, *, dense: bool = Fa
     return ContactSetup(kinds=kinds, points=f(points), normals=f(normals), radii=f(radii), moving=f(moving),
                         owns_start=f(owns_start), owns_end=f(owns_end), filament_radius=f(contact.diameter / 2),
                         activation=f(delta), stiffness=f(k), force_scale=f(EI / length**2),
-                        smooth_start=f(_continues(network)[0]), smooth_end=f(_continues(network)[1]),
-                        seg_owns_start=f(_free_bases(network)), adjacent=jnp.asarray(adjacent_segments(network)),
+                        smooth_start=f(smooth_start), smooth_end=f(smooth_end), seg_owns_start=f(free_base),
+                        adjacent=jnp.asarray(adjacent_segments(network)),
                         reach=f(reach), capacity=capacity, per_segment=contact.per_segment, dense=dense,
                         lumped=contact.lumped)
-
-
-def _continues(network: Network) -> tuple[np.ndarray, np.ndarray]:
-    """([S], [S]): 1 where another segment ends at the segment's start node / starts at its
-    end node (the filament goes on smoothly through that node; a daughter's base is a corner)."""
-    seg = np.asarray(network.segments)
-    is_end, is_start = np.zeros(network.n_nodes, bool), np.zeros(network.n_nodes, bool)
-    is_end[seg[:, 1]], is_start[seg[:, 0]] = True, True
-    return is_end[seg[:, 0]].astype(float), is_start[seg[:, 1]].astype(float)
-
-
-def _free_bases(network: Network) -> np.ndarray:
-    """[S] 1 where the segment's start node is a filament base (not the end of another segment,
-    not a daughter base): the σ = 0 point it owns in filament–filament contact."""
-    seg, attach = np.asarray(network.segments), np.asarray(network.attach)
-    is_end = np.zeros(network.n_nodes, bool)
-    is_end[seg[:, 1]] = True
-    return (~is_end & (attach == np.arange(network.n_nodes)))[seg[:, 0]].astype(float)

@@ -29,7 +29,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from ._contact import penalty_force
-from ._contact_segment import handover_weight
+from ._contact_segment import handover_weight, location_bias, near_weight
 
 __all__ = ["PAIR_WIDTH", "PairList", "adjacent_segments", "broad_phase", "merge_pairs", "segment_table", "pair_extra",
            "pair_rows", "initial_pairs"]
@@ -175,18 +175,15 @@ def pair_rows(pairs, frame: PairList, outputs, network, setup, nodes):
     tangent = jnp.stack([jnp.cos(theta_k), jnp.sin(theta_k)], axis=-1)  # [P, 2, 2]
     slope = jnp.stack([jnp.sum(u * tangent[:, 0], -1), -jnp.sum(u * tangent[:, 1], -1)], axis=1)
     s = jnp.clip(sigma, 0.0, 1.0)
-    bias = 0.05 * jnp.clip(gaps[:, None] / length, 0.0, 1.0) ** 2 * (sigma - 0.5)
+    bias = location_bias(sigma, gaps[:, None], length)
     # the band is judged on the pair's lowest possible gap (bounding circles of radius l/2
-    # around the chords' midpoints), not on the gap at the current σ: a slot resting at σ = ½
-    # would not see the segments' ends approach
-    band = jnp.maximum(10.0 * setup.activation, 0.05 * length)
+    # around the chords' midpoints), not on the gap at the current σ
     r_nodes, angle_nodes = nodes
     a, b = jnp.asarray(network.segments)[seg, 0], jnp.asarray(network.segments)[seg, 1]  # [P, 2]
     centers = 0.5 * (r_nodes[a] + r_nodes[b])
     lowest = (jnp.linalg.norm(centers[:, 0] - centers[:, 1], axis=-1) - 0.5 * jnp.sum(length, axis=1)
               - 2.0 * setup.filament_radius)
-    x = jnp.clip(2.0 * (band - lowest[:, None]) / band, 0.0, 1.0)
-    near = x * x * (3.0 - 2.0 * x)
+    near = near_weight(lowest[:, None], length, setup.activation)
     location = near * (sigma - jnp.clip(sigma - slope - bias, 0.0, 1.0)) + (1.0 - near) * (sigma - 0.5)
     # each side's node hand-over (as for obstacles): the slope at its end nodes of the distance
     # to the other side's closest point

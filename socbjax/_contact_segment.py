@@ -35,7 +35,8 @@ import numpy as np
 from ._contact import penalty_force
 from ._quadrature import coupling_matrix
 
-__all__ = ["ContactSetup", "SLOT_WIDTH", "planar_contact_segment", "segment_jumps", "contact_segment_rows", "initial_slots", "handover_weight"]
+__all__ = ["ContactSetup", "SLOT_WIDTH", "planar_contact_segment", "segment_jumps", "contact_segment_rows", "initial_slots", "handover_weight",
+           "smoothstep", "location_bias", "near_weight"]
 
 _MINV = np.linalg.inv(coupling_matrix(1.0))  # Hermite data (σ-units) -> monomial coefficients
 _POW = np.arange(6)
@@ -206,19 +207,37 @@ def _cross2(u, v):
     return u[..., 0] * v[..., 1] - u[..., 1] * v[..., 0]
 
 
-def grad_at_ends(setup, ends, displacement, axis):
-    """[2, C] slope ∇φ·t of every obstacle's distance at the segment's start and end node."""
+def _end_distances(setup, ends, displacement, axis):
+    """(φ [2, C] µm, slope ∇φ·t [2, C]) of every obstacle at the segment's start and end node."""
     r_a, r_b, theta_a, theta_b = ends
-    rows = []
+    phi, slope = [], []
     for r, theta in ((r_a, theta_a), (r_b, theta_b)):
         t = jnp.stack([jnp.cos(theta), jnp.sin(theta)])
-        rows.append(jnp.stack([_signed_distance(setup, k, r, displacement, axis)[1] @ t for k in range(setup.n_obstacles)]))
-    return jnp.stack(rows)
+        at = [_signed_distance(setup, k, r, displacement, axis) for k in range(setup.n_obstacles)]
+        phi.append(jnp.stack([p for p, _ in at]))
+        slope.append(jnp.stack([g @ t for _, g in at]))
+    return jnp.stack(phi), jnp.stack(slope)
 
 
-def _step(x):
+def smoothstep(x):
+    """3x² − 2x³ on [0, 1] (0 below, 1 above): a C¹ switch."""
     x = jnp.clip(x, 0.0, 1.0)
     return x * x * (3.0 - 2.0 * x)
+
+
+def location_bias(sigma, gaps, length):
+    """The pull of a slot's location row toward the segment's middle: regular where the
+    distance is flat along the segment, fading as (gap/l)² (0 in contact)."""
+    return _LOCATION_BIAS * jnp.clip(gaps / length, 0.0, 1.0) ** 2 * (sigma - 0.5)
+
+
+def near_weight(lowest, length, activation):
+    """1 where the closest-point rule of a slot applies, 0 where the slot rests at σ = ½:
+    judged on the *lowest possible* gap (µm) of the segment(s), smoothly over the band
+    gap < max(10 δ, l/20) (a slot resting at σ = ½ would not see an inclined segment's end
+    approach; every curve point lies within l/2 of its chord's midpoint)."""
+    band = jnp.maximum(10.0 * activation, 0.05 * length)
+    return smoothstep(2.0 * (band - lowest) / band)
 
 
 def handover_weight(s, slopes, owns_start, owns_end, smooth):
@@ -229,9 +248,9 @@ def handover_weight(s, slopes, owns_start, owns_end, smooth):
     starts there (1 − g(slope) near its start), g = 1 for slope ≥ 0 falling to 0 at −_HANDOVER:
     the weights sum to one across the node, and the force is continuous."""
     smooth_start, smooth_end = smooth
-    g = lambda slope: 1.0 - _step(-slope / _HANDOVER)  # noqa: E731
+    g = lambda slope: 1.0 - smoothstep(-slope / _HANDOVER)  # noqa: E731
     end = jnp.where(s >= 1.0, owns_end * jnp.where(smooth_end > 0, g(slopes[1]), 1.0), 1.0)
-    start = jnp.where(smooth_start > 0, 1.0 - g(slopes[0]) * (1.0 - _step(s / 0.25)), jnp.where(s <= 0.0, owns_start, 1.0))
+    start = jnp.where(smooth_start > 0, 1.0 - g(slopes[0]) * (1.0 - smoothstep(s / 0.25)), jnp.where(s <= 0.0, owns_start, 1.0))
     return end * start
 
 
@@ -256,9 +275,9 @@ def _slot_rows(ends, points, s, sigma, F, theta_k, kappa_k, theta_at, dtheta_at,
     sphere = jnp.asarray([k == "sphere" for k in setup.kinds])
     radial = jnp.maximum(phi + setup.radii, 1e-300)
     bend = kappa_k * jnp.sum(grad * normal, axis=-1) + jnp.where(sphere, (1.0 - slope**2) / radial, 0.0)
-    end_phi = [[_signed_distance(setup, k, r, displacement, axis)[0] for k in range(setup.n_obstacles)] for r in ends[:2]]
-    nearer = jnp.where(jnp.stack(end_phi[0]) <= jnp.stack(end_phi[1]), 0.0, 1.0)
-    bias = _LOCATION_BIAS * jnp.clip(gaps / length, 0.0, 1.0) ** 2 * (sigma - 0.5)
+    end_phi, end_slope = _end_distances(setup, ends, displacement, axis)
+    nearer = jnp.where(end_phi[0] <= end_phi[1], 0.0, 1.0)
+    bias = location_bias(sigma, gaps, length)
     if setup.dense:  # pattern template: no projection, no ownership, force everywhere
         location = slope + bias
         magnitude = setup.stiffness * gaps * (1.0 + gaps)
@@ -266,21 +285,15 @@ def _slot_rows(ends, points, s, sigma, F, theta_k, kappa_k, theta_at, dtheta_at,
         closest = jnp.where(bend * length > 0, sigma - jnp.clip(sigma - slope - bias, 0.0, 1.0), sigma - nearer)
         # far from a plane the slot rests at the segment's middle (its force is 0 there
         # anyway): the closest-point rule, whose choice of branch may jump while a segment is
-        # straight and parallel to the plane, takes over smoothly inside the band
-        # gap < max(10 δ, l/20) of the segment's lowest possible gap.  A sphere's distance is
-        # curved along any segment (d²φ/ds² > 0 near it): its rule holds everywhere (a band
-        # there moves the slot along a fold).
-        band = jnp.maximum(10.0 * setup.activation, 0.05 * length)
-        # the band is tested on a lower bound of the segment's gap, not the gap at the current
-        # σ (a slot resting at σ = ½ would not see an end of an inclined segment reach the
-        # plane): every curve point lies within l/2 of the chord's midpoint (inextensible)
+        # straight and parallel to the plane, takes over near it (:func:`near_weight`).  A
+        # sphere's distance is curved along any segment (d²φ/ds² > 0 near it): its rule holds
+        # everywhere (a band there moves the slot along a fold).
         middle = 0.5 * (ends[0] + ends[1])  # (r_a + r_b) / 2
         lowest = jnp.stack([_signed_distance(setup, k, middle, displacement, axis)[0]
                             for k in range(setup.n_obstacles)]) - 0.5 * length - setup.filament_radius
-        x = jnp.clip(2.0 * (band - lowest) / band, 0.0, 1.0)
-        near = jnp.where(sphere, 1.0, x * x * (3.0 - 2.0 * x))
+        near = jnp.where(sphere, 1.0, near_weight(lowest, length, setup.activation))
         location = near * closest + (1.0 - near) * (sigma - 0.5)
-        owned = handover_weight(s, grad_at_ends(setup, ends, displacement, axis), owns_start, owns_end, smooth)
+        owned = handover_weight(s, end_slope, owns_start, owns_end, smooth)
         magnitude = owned * penalty_force(gaps, setup.activation, setup.stiffness)
     force = (F - magnitude[:, None] * grad) / setup.force_scale
     rows = jnp.concatenate([location[:, None], force, (theta_k - theta_at)[:, None],

@@ -195,9 +195,7 @@ def _read_path(reader: Reader, sizes: _Sizes, version: int) -> dict[str, np.ndar
     K = arrays["displacement"].shape[0]
     if "twists" not in arrays:  # before format 4: not recorded (CompressionResult.solution says so)
         arrays["twists"] = np.zeros((K, 0))
-    if "contact_count" not in arrays:  # before format 5: no contact model
-        arrays.update(contact_count=np.zeros(K, np.int32), min_gap=np.full(K, np.nan), contact_force=np.zeros(K),
-                      contact_points=np.zeros((K, 0, sizes.dim)), contact_forces=np.zeros((K, 0, sizes.dim)))
+    # before format 5 the contact outputs are absent: CompressionResult fills "no contact"
     if arrays["displacement"].shape[0] == 0:
         raise InvalidFile("/path has no steps (K = 0); a result holds at least its start")
     _check_range("/path/phase", arrays["phase"], len(PHASES), f"phases {dict(enumerate(PHASES))}")

@@ -23,7 +23,8 @@ from ._result import PHASES, CompressionResult, LimitPoint
 from ._solution import RESULTS, result_name
 
 __all__ = ["probe_network", "probe_gap", "probe_frame", "applied_loads", "observe", "observe_rows", "compress_settings", "end_nodes",
-           "check_compress_inputs", "check_compress_options", "package_path", "parameters_json", "surface_crossing"]
+           "check_compress_inputs", "check_compress_options", "no_surfaces", "package_path", "parameters_json",
+           "surface_crossing"]
 
 
 def _is_chain(network: Network) -> bool:
@@ -227,15 +228,16 @@ def observe(model, X, loads, U=None):
 
     def one(x, u):
         st = unravel(x)
-        end_forces, extra = model.contact_ends(st) if contact is not None else (None, 0.0)
-        axial = routed_nodal_force(st.forces, net, loads + extra, end_forces) @ axis
         twists = getattr(st, "twists", jnp.zeros(0))  # the jointed baseline has no frame angles
-        probe = jnp.sum(jnp.where(net.probe, axial, 0.0))
         if contact is None:
+            axial = routed_nodal_force(st.forces, net, loads) @ axis
             empty = jnp.zeros((0, net.dim))
             outputs = (jnp.zeros((), jnp.int32), jnp.asarray(jnp.nan), jnp.zeros(()), empty, empty)
-        else:
-            points, gaps, F, counted, _ = model.contact_geometry(st, Control.make(1.0, u))
+            probe = jnp.sum(jnp.where(net.probe, axial, 0.0))
+        else:  # one evaluation of the contact kernel gives the slots and the segments' end forces
+            points, gaps, F, counted, end_forces, extra = model.contact_geometry(st, Control.make(1.0, u))
+            axial = routed_nodal_force(st.forces, net, loads + extra, end_forces) @ axis
+            probe = jnp.sum(jnp.where(net.probe, axial, 0.0))
             # the law's force is on (and not handed over to a neighbouring segment's slot)
             touching = counted & (gaps < contact.activation) & (jnp.linalg.norm(F, axis=-1) > 1e-9 * contact.force_scale)
             F = jnp.where(touching[..., None], F, 0.0)  # not round-off of a zero force
@@ -297,6 +299,12 @@ def observe_rows(model, X: np.ndarray, capacity: int, U: np.ndarray | None = Non
     return [np.asarray(a)[:K] for a in observe(model, jnp.asarray(padded), model.network.loads, jnp.asarray(u))]
 
 
+def no_surfaces(model, parameters) -> bool:
+    """Whether the path was computed with contact whose ``surfaces=False``: the user says there
+    are no probe face and substrate, so crossing their planes is no failure."""
+    return getattr(model, "contact", None) is not None and not (parameters or {}).get("contact", {}).get("surfaces", True)
+
+
 def package_path(model, rec, extra, result, settings, u_max, unload, parameters) -> CompressionResult:
     net = model.network
     capacity = settings.max_steps * (3 if unload else 2) + 1  # settle point + every phase's buffer
@@ -312,8 +320,8 @@ def package_path(model, rec, extra, result, settings, u_max, unload, parameters)
               "n_nodes": int(net.n_nodes), "n_segments": int(net.n_segments), "n_junctions": int(net.n_junctions),
               "gap_um": probe_gap(net) if np.isfinite(probe_gap(net)) else None, **(parameters or {})}
     crossed = np.flatnonzero(surface_crossing(net, positions, np.asarray(rec["U"])))
-    if getattr(model, "contact", None) is not None and not (parameters or {}).get("contact", {}).get("surfaces", True):
-        crossed = crossed[:0]  # contact without surfaces: the user says there are no probe face and substrate
+    if no_surfaces(model, parameters):
+        crossed = crossed[:0]
     events = _limit_points(np.asarray(rec["U"]), probe_force, rec["SIGN"], rec["PHASE"])
     if crossed.size:
         k = int(crossed[0])

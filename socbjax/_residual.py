@@ -181,15 +181,26 @@ def _segment_rows(state, network, quad, frames, m_start):
     return kernel(r[a], d[a], m_start, r[b], d[b], m[b], state.forces, network.lengths, network.EI, frames, quad, twist)
 
 
+def _start_moments(state: SOCBState, network: Network, control: Control):
+    """(moment at each segment's start less what the start node hands over [S], the handed-over
+    moments at the nodes: junction, applied couples) — pN·µm."""
+    junction_segment, junction_node = moment_transfer(state, network)
+    couple_segment, couple_node = nodal_couple_transfer(control.load_factor * network.couples, network)
+    return state.moments[network.segments[:, 0]] - junction_segment - couple_segment, junction_node, couple_node
+
+
+def _start_node_loads(start_loads, network: Network):
+    """[N, d] the segments' start-node loads [S, d] (lumped contact) summed at their nodes."""
+    return jax.ops.segment_sum(start_loads, network.segments[:, 0], num_segments=network.n_nodes)
+
+
 def socb_residual(state: SOCBState, network: Network, control: Control, frames: Float[Array, "S 2 3"],
                   quad: SegmentQuadrature, contact: ContactSetup | None = None) -> Float[Array, " R"]:
     """The full SOCB residual vector (dimensionless): segment rows, node rows, and with
     ``contact`` the contact slots' rows last."""
     r, d, m = state.positions, state.directors, state.moments
     length_ref, EI_ref, _ = reference_scales(network)
-    junction_segment, junction_node = moment_transfer(state, network)
-    couple_segment, couple_node = nodal_couple_transfer(control.load_factor * network.couples, network)
-    m_start = m[network.segments[:, 0]] - junction_segment - couple_segment
+    m_start, junction_node, couple_node = _start_moments(state, network, control)
     end_forces, slot_rows, loads = None, jnp.zeros(0), control.load_factor * network.loads
     if contact is not None:
         extra, pair_frame = None, None
@@ -198,7 +209,7 @@ def socb_residual(state: SOCBState, network: Network, control: Control, frames: 
             extra = pair_extra(state.pairs, pair_frame.table)
         seg, slot_rows, end_forces, start_loads, _, _, at_pairs = contact_segment_rows(
             r, d, m, m_start, state.forces, state.contacts, network, contact, control, quad, extra)
-        loads = loads + jax.ops.segment_sum(start_loads, network.segments[:, 0], num_segments=network.n_nodes)
+        loads = loads + _start_node_loads(start_loads, network)
         if pair_frame is not None:
             slot_rows = jnp.concatenate([slot_rows.ravel(), pair_rows(state.pairs, pair_frame, at_pairs, network,
                                                                       contact, (r, d))[0].ravel()])
@@ -326,24 +337,25 @@ class SOCBModel(eqx.Module):
 
     def contact_geometry(self, state: SOCBState, control: Control | None = None):
         """Contact slots of ``state`` (2D contact models): (points [c, 2] µm, gaps [c] µm,
-        forces on the filament [c, 2] pN, counted [c] bool, end forces [S, 2] pN) over the
-        c = S·C obstacle slots, then the P pair slots (their point on segment i; force on i).
+        forces on the filament [c, 2] pN, counted [c] bool, end forces [S, 2] pN, nodal loads
+        of lumped contact [N, 2] pN) over the c = S·C obstacle slots, then the P pair slots
+        (their point on segment i; force on i).
         A slot is not counted where it sits on the start node of a segment inside a filament
         (the segment ending there reports that point) or on a node anchored on the obstacle
         (a probe tip on the probe face), nor where a pair slot is empty."""
-        return self._contact_parts(state, Control.make() if control is None else control)[:5]
+        parts = self._contact_parts(state, Control.make() if control is None else control)
+        return (*parts[:5], parts[6])
 
     def _contact_parts(self, state: SOCBState, control: Control):
-        """:meth:`contact_geometry`'s outputs and the pair slots' points on both sides [P, 2, 2]."""
+        """:meth:`contact_geometry`'s first five outputs, the pair slots' points on both sides
+        [P, 2, 2], and the nodal loads [N, 2] of lumped contact."""
         net, c = self.network, self.contact
-        m = state.moments
-        junction_segment, _ = moment_transfer(state, net)
-        couple_segment, _ = nodal_couple_transfer(control.load_factor * net.couples, net)
-        m_start = m[net.segments[:, 0]] - junction_segment - couple_segment
+        m_start = _start_moments(state, net, control)[0]
         frame = self.pair_list(state, rebuild=False) if self.n_pairs else None
         extra = None if frame is None else pair_extra(state.pairs, frame.table)
-        _, _, end_forces, _, points, gaps, at_pairs = contact_segment_rows(
-            state.positions, state.directors, m, m_start, state.forces, state.contacts, net, c, control, self.quad, extra)
+        _, _, end_forces, start_loads, points, gaps, at_pairs = contact_segment_rows(
+            state.positions, state.directors, state.moments, m_start, state.forces, state.contacts, net, c, control,
+            self.quad, extra)
         s = jnp.clip(state.contacts[..., 0], 0.0, 1.0)
         counted = (jnp.where(s >= 1.0, c.owns_end, 1.0) * jnp.where(s <= 0.0, c.owns_start, 1.0)) > 0
         out = (points.reshape(-1, 2), gaps.reshape(-1), state.contacts[..., 1:3].reshape(-1, 2), counted.reshape(-1))
@@ -352,7 +364,7 @@ class SOCBModel(eqx.Module):
             _, pair_gaps, both = pair_rows(state.pairs, frame, at_pairs, net, c, (state.positions, state.directors))
             out = (jnp.concatenate([out[0], both[:, 0]]), jnp.concatenate([out[1], pair_gaps]),
                    jnp.concatenate([out[2], state.pairs[:, 4:6]]), jnp.concatenate([out[3], frame.ids[:, 0] >= 0]))
-        return (*out, end_forces, both)
+        return (*out, end_forces, both, _start_node_loads(start_loads, net))
 
     def step_admissible(self, old: SOCBState, new: SOCBState):
         """(admissible, overflow) of a path step.  Not admissible when a segment may have moved
@@ -373,7 +385,7 @@ class SOCBModel(eqx.Module):
         turned = jnp.abs(new.directors - old.directors)
         turned = 1.5 * jnp.maximum(turned[a], turned[b])  # the turn inside a segment, with a margin
         reach = jnp.maximum(moved[a], moved[b]) + net.lengths * turned  # [S]
-        _, gaps, _, _, _ = self.contact_geometry(old)
+        _, gaps, _, _, _, both_old, _ = self._contact_parts(old, Control.make())
         C, S = self.n_obstacles, net.n_segments
         spheres = np.array([k == "sphere" for k in c.kinds], bool)
         phi = gaps[: S * C].reshape(S, C)[:, spheres] + c.filament_radius
@@ -384,31 +396,19 @@ class SOCBModel(eqx.Module):
         axis_distance = jnp.where(old.pairs[:, 0] >= 0, gaps[S * C:] + 2.0 * c.filament_radius, jnp.inf)
         # a listed pair that moved closer than D_i + D_j: still on the same side of each other
         # (the separation of its closest points along the old direction has not turned over)
-        sep_old, sep_new = self._pair_separation(old), self._pair_separation(new)
-        same_side = jnp.sum(sep_old * sep_new, axis=-1) > 0
+        both_new = self._contact_parts(new, Control.make())[5]
+        same_side = jnp.sum((both_old[:, 0] - both_old[:, 1]) * (both_new[:, 0] - both_new[:, 1]), axis=-1) > 0
         near = reach[ids[:, 0]] + reach[ids[:, 1]] >= axis_distance
         ok = ok & jnp.all(~near | same_side) & (2.0 * jnp.max(reach) < c.reach)
         return ok, self.pair_list(new).overflow
-
-    def _pair_separation(self, state: SOCBState) -> Array:
-        """[P, 2] r_i − r_j between the closest points of each pair slot (µm; 0 if empty)."""
-        both = self._contact_parts(state, Control.make())[5]
-        return both[:, 0] - both[:, 1]
 
     def contact_ends(self, state: SOCBState):
         """(internal force at each segment's end [S, d] pN, extra nodal loads [N, d] pN): the
         state's (start) forces less the segments' interior contact forces, and the loads that
         lumped contact (comparison only) puts on start nodes; (forces, 0) without contact."""
-        zero = jnp.zeros_like(state.positions)
         if self.contact is None:
-            return state.forces, zero
-        if self.n_pairs or not self.contact.lumped:
-            return self.contact_geometry(state)[4], zero
-        F = state.contacts[..., 1:3]
-        s = jnp.clip(state.contacts[..., :1], 0.0, 1.0)
-        start = jax.ops.segment_sum(jnp.sum((1.0 - s) * F, axis=1), self.network.segments[:, 0],
-                                    num_segments=self.network.n_nodes)
-        return state.forces - jnp.sum(s * F, axis=1), start
+            return state.forces, jnp.zeros_like(state.positions)
+        return self.contact_geometry(state)[4:]
 
     def tangents(self, state: SOCBState) -> Array:
         return state_tangents(state.directors, self.network.dim)

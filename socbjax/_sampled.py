@@ -35,7 +35,7 @@ from jax.flatten_util import ravel_pytree
 from jaxtyping import Array
 
 from ._adjoint import ImplicitAdjoint
-from ._probe import applied_loads, end_nodes, observe, parameters_json, probe_gap, surface_crossing
+from ._probe import applied_loads, end_nodes, no_surfaces, observe, parameters_json, probe_gap, surface_crossing
 from ._network import is_traced
 from ._protocol import UNLOAD_MARGIN, phase_problem, settled_displacement
 from ._residual import Control
@@ -202,8 +202,8 @@ def compress_at(model, displacement, at=None, *, unload=False, perturbation=None
     positions, tangents, moments, forces, probe_force, axial, twists = observed[:7]
     count, min_gap, contact_force, contact_points, contact_forces = observed[7:]
     crossed = jnp.any(surface_crossing(net, positions, U) & converged)
-    if getattr(model, "contact", None) is not None and not (parameters or {}).get("contact", {}).get("surfaces", True):
-        crossed = jnp.asarray(False)  # contact without surfaces: the user says there are no probe face and substrate
+    if no_surfaces(model, parameters):
+        crossed = jnp.asarray(False)
     result = RESULTS.where((result == RESULTS.successful) & crossed, RESULTS.surface_crossed, result)
     M = at.shape[0]
     ends = end_nodes(net)
