@@ -35,6 +35,7 @@ SCRIPTS = [
     "twist_unit_mesh",
     "twist_outcrop",
     "contact_planar",
+    "contact_outcrop",
     "peers/elastica_comparison",  # PyElastica columns only with the extra socbjax[peers]
 ]
 

@@ -8,6 +8,7 @@ carries; ``contact=None`` keeps the contact-free model exactly.
 
 from __future__ import annotations
 
+import jax
 import jax.numpy as jnp
 import numpy as np
 
@@ -59,10 +60,10 @@ def _segment_roles(network: Network) -> tuple[np.ndarray, np.ndarray, np.ndarray
 
 
 def _ownership(network: Network, kinds, points, normals, radii, free_base):
-    """(owns_start, owns_end) [S, C]: every node's point belongs to one segment (the one that
+    """(owns_start, owns_end [S, C], anchored [N, C]): every node's point belongs to one segment (the one that
     ends there; a filament's base to the segment that starts there; a daughter base to its
-    mother's segment), and a supported node on an obstacle's surface to none.  ``free_base``:
-    [S] from :func:`_segment_roles`."""
+    mother's segment), and a supported node on an obstacle's surface (anchored) to none.
+    ``free_base``: [S] from :func:`_segment_roles`."""
     seg = np.asarray(network.segments)
     n_nodes = network.n_nodes
     pos = jnp.asarray(network.positions)  # traced under jit: ownership is data, not structure
@@ -78,7 +79,57 @@ def _ownership(network: Network, kinds, points, normals, radii, free_base):
     anchored = jnp.stack(columns, axis=1) if columns else jnp.zeros((n_nodes, 0), bool)
     owns_start = (jnp.asarray(free_base)[:, None] > 0) & ~anchored[seg[:, 0]]
     owns_end = ~anchored[seg[:, 1]]
-    return owns_start.astype(jnp.float64), owns_end.astype(jnp.float64)
+    return owns_start.astype(jnp.float64), owns_end.astype(jnp.float64), anchored.astype(jnp.float64)
+
+
+def _beside_anchors(network: Network, anchored, owns_start, owns_end, smooth_start, smooth_end):
+    """Per (segment, obstacle) node roles next to an anchored segment: a segment anchored on an
+    obstacle at one end (a strand's base on the substrate, a tip on the probe face) starts
+    inside the contact band there, and its slot rests on the anchor (no force); so the node at
+    its other end belongs wholly to the neighbouring segment (no hand-over toward the anchored
+    one), which keeps that node off the surface.  Returns (owns_start, owns_end, smooth_start,
+    smooth_end) [S, C]."""
+    seg = np.asarray(network.segments)
+    S = len(seg)
+    C = anchored.shape[1]
+    nxt, prv = np.full(S, -1), np.full(S, -1)
+    starting = {int(a): i for i, a in enumerate(seg[:, 0])}
+    for i, b in enumerate(seg[:, 1]):
+        j = starting.get(int(b), -1)
+        if j >= 0 and smooth_end[i] > 0:
+            nxt[i], prv[j] = j, i
+    smooth_start = jnp.broadcast_to(jnp.asarray(smooth_start)[:, None], (S, C))
+    smooth_end = jnp.broadcast_to(jnp.asarray(smooth_end)[:, None], (S, C))
+    if C == 0:
+        return owns_start, owns_end, smooth_start, smooth_end
+    has_next, has_prev = jnp.asarray(nxt >= 0)[:, None], jnp.asarray(prv >= 0)[:, None]
+    # the next segment's far end anchored: this segment keeps its end node
+    next_anchored = has_next & (anchored[seg[np.maximum(nxt, 0), 1]] > 0)
+    # the previous segment's far start anchored: this segment owns its start node
+    prev_anchored = has_prev & (anchored[seg[np.maximum(prv, 0), 0]] > 0)
+    smooth_end = jnp.where(next_anchored, 0.0, smooth_end)
+    smooth_start = jnp.where(prev_anchored, 0.0, smooth_start)
+    owns_start = jnp.where(prev_anchored, 1.0, owns_start)
+    # and the other side of those nodes gives them up: the anchored segment's start / end
+    gives_start = jnp.zeros((S, C)).at[np.maximum(nxt, 0)].max(next_anchored.astype(float)) > 0
+    gives_end = jnp.zeros((S, C)).at[np.maximum(prv, 0)].max(prev_anchored.astype(float)) > 0
+    smooth_start = jnp.where(gives_start, 0.0, smooth_start)
+    owns_end = jnp.where(gives_end, 0.0, owns_end)
+    smooth_end = jnp.where(gives_end, 0.0, smooth_end)
+    return owns_start, owns_end, smooth_start, smooth_end
+
+
+def _check_spatial(network: Network, contact: Contact) -> None:
+    """Refuse what 3D contact does not do yet, naming the fix."""
+    if contact.self_contact:
+        raise NotImplementedError("filament–filament and self-contact are built for planar (2D) networks so far; in 3D "
+                                  "use socbjax.Contact(self_contact=False, ...) (the probe face, the substrate, planes "
+                                  "and spheres)")
+    if network.twisting:
+        kappa = network.natural_curvature
+        if not isinstance(kappa, jax.core.Tracer) and np.any(np.asarray(kappa)[:, :2] != 0):
+            raise NotImplementedError("3D contact on filaments with natural curvature (κ₁, κ₂ ≠ 0) is not built yet; "
+                                      "use a straight rest shape (natural_curvature=None) with contact")
 
 
 def contact_setup(network: Network, contact: Contact | None, *, dense: bool = False) -> ContactSetup | None:
@@ -89,9 +140,8 @@ def contact_setup(network: Network, contact: Contact | None, *, dense: bool = Fa
     if not isinstance(contact, Contact):
         raise TypeError(f"contact must be None or a socbjax.Contact (e.g. contact=socbjax.Contact(planes=...)), got "
                         f"{type(contact).__name__}")
-    if network.dim != 2:
-        raise NotImplementedError("contact is built for planar (2D) networks so far; 3D contact (outcrops) is the "
-                                  "next step of issue 15. Use contact=None for 3D networks.")
+    if network.dim == 3:
+        _check_spatial(network, contact)
     if network.padding is not None:
         raise ValueError("contact is not supported on padded networks (socbjax.pad_outcrop); solve each realisation")
     for i, obstacle in enumerate(contact.planes + contact.obstacles):
@@ -100,7 +150,9 @@ def contact_setup(network: Network, contact: Contact | None, *, dense: bool = Fa
                              f"and normals with {network.dim} components")
     kinds, points, normals, radii, moving = _obstacle_table(network, contact)
     free_base, smooth_start, smooth_end = _segment_roles(network)
-    owns_start, owns_end = _ownership(network, kinds, points, normals, radii, free_base)
+    owns_start, owns_end, anchored = _ownership(network, kinds, points, normals, radii, free_base)
+    slot_roles = _beside_anchors(network, anchored, owns_start, owns_end, smooth_start, smooth_end)
+    seg = np.asarray(network.segments)
     EI, length = jnp.mean(network.EI), jnp.mean(network.lengths)
     delta, k = contact.law(EI)
     f = lambda v: jnp.asarray(v, jnp.float64)  # noqa: E731
@@ -108,7 +160,10 @@ def contact_setup(network: Network, contact: Contact | None, *, dense: bool = Fa
     capacity = (max(8, S) if contact.capacity is None else contact.capacity) if contact.self_contact else 0
     reach = jnp.maximum(0.25 * length, 20.0 * delta) if contact.reach is None else contact.reach
     return ContactSetup(kinds=kinds, points=f(points), normals=f(normals), radii=f(radii), moving=f(moving),
-                        owns_start=f(owns_start), owns_end=f(owns_end), filament_radius=f(contact.diameter / 2),
+                        owns_start=f(slot_roles[0]), owns_end=f(slot_roles[1]), slot_smooth_start=f(slot_roles[2]),
+                        slot_smooth_end=f(slot_roles[3]),
+                        active=f(1.0 - jnp.maximum(anchored[seg[:, 0]], anchored[seg[:, 1]])),
+                        filament_radius=f(contact.diameter / 2),
                         activation=f(delta), stiffness=f(k), force_scale=f(EI / length**2),
                         smooth_start=f(smooth_start), smooth_end=f(smooth_end), seg_owns_start=f(free_base),
                         adjacent=jnp.asarray(adjacent_segments(network)),

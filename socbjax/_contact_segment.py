@@ -36,7 +36,7 @@ from ._contact import penalty_force
 from ._quadrature import coupling_matrix
 
 __all__ = ["ContactSetup", "SLOT_WIDTH", "planar_contact_segment", "segment_jumps", "contact_segment_rows", "initial_slots", "handover_weight",
-           "smoothstep", "location_bias", "near_weight"]
+           "smoothstep", "location_bias", "near_weight", "contact_slot_rows", "signed_distance"]
 
 _MINV = np.linalg.inv(coupling_matrix(1.0))  # Hermite data (σ-units) -> monomial coefficients
 _POW = np.arange(6)
@@ -69,6 +69,9 @@ class ContactSetup(eqx.Module):
     force_scale: jax.Array  # pN, to make the λ rows dimensionless
     smooth_start: jax.Array = None  # [S] 1 where the filament continues smoothly before the start node
     smooth_end: jax.Array = None  # [S] 1 where it continues after the end node
+    slot_smooth_start: jax.Array = None  # [S, C] the same per obstacle (0 next to a segment anchored on it)
+    slot_smooth_end: jax.Array = None  # [S, C]
+    active: jax.Array = None  # [S, C] 0 where the segment is anchored on the obstacle (no contact with it)
     seg_owns_start: jax.Array = None  # [S] 1 where a segment owns its σ = 0 point (filament bases)
     adjacent: jax.Array = None  # [S, A] segments sharing a node (never a contact pair), −1 padded
     reach: jax.Array = None  # µm: how far beyond touching a pair enters the list (≥ 2 × a step's motion)
@@ -126,7 +129,7 @@ def _angle(x, coef, sigma, a):
     return mono @ coef + value, dmono @ coef + first
 
 
-def _signed_distance(setup: ContactSetup, k: int, r, displacement, axis):
+def signed_distance(setup: ContactSetup, k: int, r, displacement, axis):
     """(φ µm, unit ∇φ) of obstacle k at the point r: distance of the axis from its surface."""
     point = setup.points[k] + setup.moving[k] * displacement * axis
     if setup.kinds[k] == "plane":
@@ -137,7 +140,7 @@ def _signed_distance(setup: ContactSetup, k: int, r, displacement, axis):
 
 
 def planar_contact_segment(ends, n_a, length, EI, kappa0, slots, owns_start, owns_end, setup: ContactSetup,
-                           displacement, axis, quad, extra=None, smooth=(0.0, 0.0)):
+                           displacement, axis, quad, extra=None, smooth=(0.0, 0.0), active=1.0):
     """One planar segment with its contact slots.
 
     ends : (r_a [2], θ_a, m_a, r_b [2], θ_b, m_b): positions µm, angles rad, moments pN·µm
@@ -191,9 +194,13 @@ def planar_contact_segment(ends, n_a, length, EI, kappa0, slots, owns_start, own
     seg_rows = jnp.concatenate([length_eq, moment_eq[None], bending_eq[None]])
     points = r_a + length * ((1.0 - after) * W) @ t  # r_k
     theta_at, dtheta_at = _angle(s, coef, s, a)
-    slot_rows, gaps = _slot_rows((r_a, r_b, theta_a, theta_a + turn), points[:C], s[:C], sigma[:C], slots[:, 1:3],
-                                 theta_k[:C], kappa_k[:C], theta_at[:C], dtheta_at[:C], length, owns_start, owns_end,
-                                 setup, displacement, axis, smooth)
+    tangent = jnp.stack([jnp.cos(theta_k[:C]), jnp.sin(theta_k[:C])], axis=-1)
+    bend = kappa_k[:C, None] * jnp.stack([-tangent[:, 1], tangent[:, 0]], axis=-1)  # t' = κ n
+    shape = jnp.stack([theta_k[:C] - theta_at[:C], length * kappa_k[:C] - dtheta_at[:C]], axis=1)
+    unit = lambda th: jnp.stack([jnp.cos(th), jnp.sin(th)])  # noqa: E731
+    slot_rows, gaps = contact_slot_rows((r_a, r_b, unit(theta_a), unit(theta_a + turn)), points[:C], s[:C], sigma[:C],
+                                        slots[:, 1:3], tangent, bend, shape, length, owns_start, owns_end, setup,
+                                        displacement, axis, smooth, active)
     start_load = jnp.sum(every[:, 1:3] - F_node, axis=0) if setup.lumped else jnp.zeros(2)
     return (seg_rows, slot_rows, n_a - jnp.sum(F_node, axis=0), start_load, points[:C], gaps,
             (points[C:], theta_at[C:], dtheta_at[C:]))
@@ -208,12 +215,12 @@ def _cross2(u, v):
 
 
 def _end_distances(setup, ends, displacement, axis):
-    """(φ [2, C] µm, slope ∇φ·t [2, C]) of every obstacle at the segment's start and end node."""
-    r_a, r_b, theta_a, theta_b = ends
+    """(φ [2, C] µm, slope ∇φ·t [2, C]) of every obstacle at the segment's start and end node
+    (``ends`` = (r_a, r_b, unit t_a, unit t_b))."""
+    r_a, r_b, t_a, t_b = ends
     phi, slope = [], []
-    for r, theta in ((r_a, theta_a), (r_b, theta_b)):
-        t = jnp.stack([jnp.cos(theta), jnp.sin(theta)])
-        at = [_signed_distance(setup, k, r, displacement, axis) for k in range(setup.n_obstacles)]
+    for r, t in ((r_a, t_a), (r_b, t_b)):
+        at = [signed_distance(setup, k, r, displacement, axis) for k in range(setup.n_obstacles)]
         phi.append(jnp.stack([p for p, _ in at]))
         slope.append(jnp.stack([g @ t for _, g in at]))
     return jnp.stack(phi), jnp.stack(slope)
@@ -254,33 +261,43 @@ def handover_weight(s, slopes, owns_start, owns_end, smooth):
     return end * start
 
 
-def _slot_rows(ends, points, s, sigma, F, theta_k, kappa_k, theta_at, dtheta_at, length, owns_start, owns_end, setup,
-               displacement, axis, smooth=(0.0, 0.0)):
-    """Rows [C, 5] of the slots (dimensionless) and their gaps [C] (µm)."""
-    if setup.n_obstacles == 0:
-        return jnp.zeros((0, SLOT_WIDTH)), jnp.zeros(0)
+def contact_slot_rows(ends, points, s, sigma, F, tangent, bend, shape, length, owns_start, owns_end, setup,
+                      displacement, axis, smooth=(0.0, 0.0), active=1.0):
+    """Rows of the obstacle slots of one segment, planar or spatial (dimensionless), and their
+    gaps [C] (µm).  ``ends`` = (r_a, r_b, unit t_a, unit t_b); ``points`` [C, d] the curve at
+    the slots' σ (µm); ``s`` the σ projected onto [0, 1]; ``F`` [C, d] the slots' force
+    unknowns (pN); ``tangent``, ``bend`` [C, d]: the slots' unit tangent and its arc-length
+    derivative t' (1/µm) unknowns; ``shape`` [C, w]: the rows that tie those unknowns to the
+    curve (planar: θ and κ; spatial: t and t').  Rows per slot: location, force (d), shape (w).
+    ``active`` [C]: 0 where the segment is anchored on the obstacle (a strand's base on the
+    substrate, a tip on the probe face): its axis starts on the surface, inside d/2 of it by
+    construction, so it has no contact with that obstacle (its slot rests at σ = ½); the
+    node at its free end belongs to the neighbouring segment."""
+    C = setup.n_obstacles
+    if C == 0:
+        return jnp.zeros((0, 1 + F.shape[-1] + shape.shape[-1])), jnp.zeros(0)
     phi, grad = [], []
-    for k in range(setup.n_obstacles):  # a handful of obstacles: unrolled
-        p, g = _signed_distance(setup, k, points[k], displacement, axis)
+    for k in range(C):  # a handful of obstacles: unrolled
+        p, g = signed_distance(setup, k, points[k], displacement, axis)
         phi.append(p)
         grad.append(g)
     phi, grad = jnp.stack(phi), jnp.stack(grad)
     gaps = phi - setup.filament_radius
-    tangent = jnp.stack([jnp.cos(theta_k), jnp.sin(theta_k)], axis=-1)
-    normal = jnp.stack([-jnp.sin(theta_k), jnp.cos(theta_k)], axis=-1)
     slope = jnp.sum(grad * tangent, axis=-1)  # dφ/ds at the slot (dimensionless)
-    # d²φ/ds² = κ ∇φ·n + t·Hφ·t (a sphere's Hessian: (1 − (∇φ·t)²)/distance): a stationary
+    # d²φ/ds² = ∇φ·t' + t·Hφ·t (a sphere's Hessian: (1 − (∇φ·t)²)/distance): a stationary
     # point with d²φ/ds² ≤ 0 is a maximum (a segment bulging away), and the closest point is
     # then the nearer end, which the row selects instead
     sphere = jnp.asarray([k == "sphere" for k in setup.kinds])
     radial = jnp.maximum(phi + setup.radii, 1e-300)
-    bend = kappa_k * jnp.sum(grad * normal, axis=-1) + jnp.where(sphere, (1.0 - slope**2) / radial, 0.0)
+    bend = jnp.sum(grad * bend, axis=-1) + jnp.where(sphere, (1.0 - slope**2) / radial, 0.0)
     end_phi, end_slope = _end_distances(setup, ends, displacement, axis)
     nearer = jnp.where(end_phi[0] <= end_phi[1], 0.0, 1.0)
     bias = location_bias(sigma, gaps, length)
     if setup.dense:  # pattern template: no projection, no ownership, force everywhere
-        location = slope + bias
-        magnitude = setup.stiffness * gaps * (1.0 + gaps)
+        # σ itself (the row's own diagonal far from contact) and the gap (the bias and the
+        # band depend on it, but only intermittently at random points)
+        location = slope + sigma + gaps
+        magnitude = setup.force_scale * gaps * (1.0 + gaps)  # O(1) rows: the pattern check compares sums
     else:
         closest = jnp.where(bend * length > 0, sigma - jnp.clip(sigma - slope - bias, 0.0, 1.0), sigma - nearer)
         # far from a plane the slot rests at the segment's middle (its force is 0 there
@@ -289,15 +306,15 @@ def _slot_rows(ends, points, s, sigma, F, theta_k, kappa_k, theta_at, dtheta_at,
         # sphere's distance is curved along any segment (d²φ/ds² > 0 near it): its rule holds
         # everywhere (a band there moves the slot along a fold).
         middle = 0.5 * (ends[0] + ends[1])  # (r_a + r_b) / 2
-        lowest = jnp.stack([_signed_distance(setup, k, middle, displacement, axis)[0]
+        lowest = jnp.stack([signed_distance(setup, k, middle, displacement, axis)[0]
                             for k in range(setup.n_obstacles)]) - 0.5 * length - setup.filament_radius
         near = jnp.where(sphere, 1.0, near_weight(lowest, length, setup.activation))
+        near = near * active
         location = near * closest + (1.0 - near) * (sigma - 0.5)
-        owned = handover_weight(s, end_slope, owns_start, owns_end, smooth)
+        owned = active * handover_weight(s, end_slope, owns_start, owns_end, smooth)
         magnitude = owned * penalty_force(gaps, setup.activation, setup.stiffness)
     force = (F - magnitude[:, None] * grad) / setup.force_scale
-    rows = jnp.concatenate([location[:, None], force, (theta_k - theta_at)[:, None],
-                            (length * kappa_k - dtheta_at)[:, None]], axis=1)
+    rows = jnp.concatenate([location[:, None], force, shape], axis=1)
     return rows, gaps
 
 
@@ -312,12 +329,13 @@ def contact_segment_rows(positions, angles, moments, m_start, forces, slots, net
 
     extra = jnp.zeros((network.n_segments, 0, SLOT_WIDTH)) if extra is None else extra
 
-    def one(end, n, length, EI, kappa0, slot, own_a, own_b, more, smooth_a, smooth_b):
+    def one(end, n, length, EI, kappa0, slot, own_a, own_b, more, smooth_a, smooth_b, active):
         return planar_contact_segment(end, n, length, EI, kappa0, slot, own_a, own_b, setup, control.displacement,
-                                      axis, quad, more, (smooth_a, smooth_b))
+                                      axis, quad, more, (smooth_a, smooth_b), active)
 
     return jax.vmap(one)(ends, forces, network.lengths, network.EI, network.natural_curvature, slots,
-                         setup.owns_start, setup.owns_end, extra, setup.smooth_start, setup.smooth_end)
+                         setup.owns_start, setup.owns_end, extra, setup.slot_smooth_start, setup.slot_smooth_end,
+                         setup.active)
 
 
 def initial_slots(network, setup: ContactSetup | None, angles) -> jax.Array:

@@ -60,7 +60,7 @@ def _even_function(q: Array, direct, coeffs: tuple[float, ...]) -> Array:
 
 def _angle_over_sine(s_squared: Array, c: Array) -> Array:
     """atan2(s, c)/s for c > 0 given s² (the angle over its sine-length), smooth at s = 0."""
-    return _even_function(s_squared / (c * c), lambda r: jnp.arctan(r) / r, _ATAN_OVER) / c
+    return _even_function(s_squared / (c * c), lambda r: jnp.arctan2(r, 1.0) / r, _ATAN_OVER) / c  # atan2: Taylor-mode (jet) ready
 
 
 def sphere_log(u: Float[Array, "3"], t: Float[Array, "3"]) -> Float[Array, "3"]:

@@ -43,6 +43,7 @@ from jaxtyping import Array, Float
 
 from ._contact_pairs import PAIR_WIDTH, PairList, broad_phase, initial_pairs, merge_pairs, pair_extra, pair_rows, segment_table
 from ._contact_segment import SLOT_WIDTH, ContactSetup, contact_segment_rows, initial_slots
+from ._contact_spatial import SPATIAL_SLOT_WIDTH, initial_spatial_slots, spatial_contact_segment_rows
 from ._geometry import orthonormal_complement
 from ._junction import director_targets, moment_transfer, nodal_couple_transfer
 from ._network import Network, node_row_width
@@ -62,6 +63,7 @@ __all__ = [
     "socb_structure",
     "state_tangents",
     "n_twists",
+    "slot_width",
 ]
 
 
@@ -92,7 +94,8 @@ class SOCBState(eqx.Module):
     moments: Array  # 2D: [N] (pN·µm); 3D: [N, 3]
     forces: Float[Array, "S d"]  # internal force per segment (pN)
     twists: Array  # material-frame angles [N] (rad) of a twisting network, else [0]
-    contacts: Array  # contact slots [S, C, 5] (σ, F pN, θ rad, κ 1/µm; socbjax._contact_segment), C = 0 without
+    contacts: Array  # contact slots: 2D [S, C, 5] (σ, F pN, θ rad, κ 1/µm; socbjax._contact_segment),
+    # 3D [S, C, 10] (σ, F pN, t, t' 1/µm; socbjax._contact_spatial); C = 0 without contact
     pairs: Array  # filament–filament contact slots [P, 10] (socbjax._contact_pairs), P = 0 without
 
 
@@ -166,6 +169,32 @@ def _frames(state: SOCBState, network: Network) -> Float[Array, "S 2 3"]:
     return jax.lax.stop_gradient(jax.vmap(orthonormal_complement)(mean))
 
 
+def slot_width(dim: int) -> int:
+    """Unknowns (and rows) per obstacle slot: 5 in 2D, 10 in 3D."""
+    return SLOT_WIDTH if dim == 2 else SPATIAL_SLOT_WIDTH
+
+
+def _twist_data(state, network):
+    """Per-segment (ψ_a, ψ_b, e_a, e_b, GJ, κ₀) of a twisting network, else None."""
+    if not network.twisting:
+        return None
+    a, b = network.segments[:, 0], network.segments[:, 1]
+    e = carried_directors(state_tangents(state.directors, 3), network)
+    return (state.twists[a], state.twists[b], e[a], e[b], network.GJ, network.natural_curvature)
+
+
+def _contact_kernel(state, network, contact, control, quad, frames, m_start, extra=None):
+    """(segment rows, slot rows, end forces, start-node loads, points, gaps, pair data or None)
+    of the segments with their contact slots, planar or spatial."""
+    r, d, m = state.positions, state.directors, state.moments
+    if network.dim == 2:
+        return contact_segment_rows(r, d, m, m_start, state.forces, state.contacts, network, contact, control, quad,
+                                    extra)
+    out = spatial_contact_segment_rows(r, d, m, m_start, state.forces, state.contacts, network, contact, control, quad,
+                                       frames, _twist_data(state, network))
+    return (*out, None)
+
+
 def _segment_rows(state, network, quad, frames, m_start):
     a, b = network.segments[:, 0], network.segments[:, 1]
     r, d, m = state.positions, state.directors, state.moments
@@ -173,10 +202,7 @@ def _segment_rows(state, network, quad, frames, m_start):
         kernel = jax.vmap(planar_segment_residual, in_axes=(0,) * 9 + (None, 0))
         return kernel(r[a], d[a], m_start, r[b], d[b], m[b], state.forces, network.lengths, network.EI, quad,
                       network.natural_curvature)
-    twist = None
-    if network.twisting:
-        e = carried_directors(state_tangents(d, 3), network)
-        twist = (state.twists[a], state.twists[b], e[a], e[b], network.GJ, network.natural_curvature)
+    twist = _twist_data(state, network)
     kernel = jax.vmap(spatial_segment_residual, in_axes=(0,) * 10 + (None, 0))
     return kernel(r[a], d[a], m_start, r[b], d[b], m[b], state.forces, network.lengths, network.EI, frames, quad, twist)
 
@@ -207,8 +233,8 @@ def socb_residual(state: SOCBState, network: Network, control: Control, frames: 
         if contact.capacity:
             frames, pair_frame = frames
             extra = pair_extra(state.pairs, pair_frame.table)
-        seg, slot_rows, end_forces, start_loads, _, _, at_pairs = contact_segment_rows(
-            r, d, m, m_start, state.forces, state.contacts, network, contact, control, quad, extra)
+        seg, slot_rows, end_forces, start_loads, _, _, at_pairs = _contact_kernel(
+            state, network, contact, control, quad, frames, m_start, extra)
         loads = loads + _start_node_loads(start_loads, network)
         if pair_frame is not None:
             slot_rows = jnp.concatenate([slot_rows.ravel(), pair_rows(state.pairs, pair_frame, at_pairs, network,
@@ -232,7 +258,7 @@ def socb_residual(state: SOCBState, network: Network, control: Control, frames: 
     else:
         candidates = jnp.concatenate([support, norm_row[:, None], d - director_targets(d, network),
                                       torsion_free[:, None], end_moment], axis=1)
-    return jnp.concatenate([seg.ravel(), candidates.ravel()[network.socb_rows]])
+    return jnp.concatenate([seg.ravel(), candidates.ravel()[network.socb_rows], slot_rows.ravel()])
 
 
 def socb_structure(network: Network, n_obstacles: int = 0, n_pairs: int = 0):
@@ -254,7 +280,7 @@ def socb_structure(network: Network, n_obstacles: int = 0, n_pairs: int = 0):
     ])
     seg_rows, width = (4, 4) if d == 2 else (9 if network.twisting else 7, node_row_width(network))
     rows = np.concatenate([np.repeat(n_nodes + np.arange(n_seg), seg_rows), np.asarray(network.socb_rows) // width])
-    slots = np.repeat(n_nodes + np.arange(n_seg), n_obstacles * SLOT_WIDTH)  # contact slots: at their segment
+    slots = np.repeat(n_nodes + np.arange(n_seg), n_obstacles * slot_width(d))  # contact slots: at their segment
     pairs = np.zeros(n_pairs * PAIR_WIDTH, int)  # pair slots join any two segments: dense solver only
     unknown, rows = np.concatenate([unknown, slots, pairs]), np.concatenate([rows, slots, pairs])
     seg, attach = np.asarray(network.segments), np.asarray(network.attach)
@@ -286,13 +312,15 @@ class SOCBModel(eqx.Module):
             directors, moments = net.tangents, jnp.zeros((net.n_nodes, 3))
         return SOCBState(positions=net.positions, directors=directors, moments=moments,
                          forces=jnp.zeros((net.n_segments, net.dim)), twists=jnp.zeros(n_twists(net)),
-                         contacts=initial_slots(net, self.contact, directors), pairs=initial_pairs(self.n_pairs))
+                         contacts=(initial_slots(net, self.contact, directors) if net.dim == 2 else
+                                   initial_spatial_slots(net, self.contact, directors)),
+                         pairs=initial_pairs(self.n_pairs))
 
     @property
     def n_unknowns(self) -> int:
         """Size of the flat state (host side, no tracing)."""
         net, w = self.network, (1 if self.network.dim == 2 else 3)
-        return (net.n_nodes * (net.dim + 2 * w) + net.n_segments * (net.dim + self.n_obstacles * SLOT_WIDTH)
+        return (net.n_nodes * (net.dim + 2 * w) + net.n_segments * (net.dim + self.n_obstacles * slot_width(net.dim))
                 + n_twists(net) + self.n_pairs * PAIR_WIDTH)
 
     @property
@@ -349,16 +377,16 @@ class SOCBModel(eqx.Module):
     def _contact_parts(self, state: SOCBState, control: Control):
         """:meth:`contact_geometry`'s first five outputs, the pair slots' points on both sides
         [P, 2, 2], and the nodal loads [N, 2] of lumped contact."""
-        net, c = self.network, self.contact
+        net, c, dim = self.network, self.contact, self.network.dim
         m_start = _start_moments(state, net, control)[0]
         frame = self.pair_list(state, rebuild=False) if self.n_pairs else None
         extra = None if frame is None else pair_extra(state.pairs, frame.table)
-        _, _, end_forces, start_loads, points, gaps, at_pairs = contact_segment_rows(
-            state.positions, state.directors, state.moments, m_start, state.forces, state.contacts, net, c, control,
-            self.quad, extra)
+        _, _, end_forces, start_loads, points, gaps, at_pairs = _contact_kernel(
+            state, net, c, control, self.quad, _frames(state, net), m_start, extra)
         s = jnp.clip(state.contacts[..., 0], 0.0, 1.0)
-        counted = (jnp.where(s >= 1.0, c.owns_end, 1.0) * jnp.where(s <= 0.0, c.owns_start, 1.0)) > 0
-        out = (points.reshape(-1, 2), gaps.reshape(-1), state.contacts[..., 1:3].reshape(-1, 2), counted.reshape(-1))
+        counted = (c.active * jnp.where(s >= 1.0, c.owns_end, 1.0) * jnp.where(s <= 0.0, c.owns_start, 1.0)) > 0
+        out = (points.reshape(-1, dim), gaps.reshape(-1), state.contacts[..., 1:1 + dim].reshape(-1, dim),
+               counted.reshape(-1))
         both = jnp.zeros((0, 2, 2))
         if frame is not None:
             _, pair_gaps, both = pair_rows(state.pairs, frame, at_pairs, net, c, (state.positions, state.directors))
@@ -382,7 +410,8 @@ class SOCBModel(eqx.Module):
         net = self.network
         a, b = net.segments[:, 0], net.segments[:, 1]
         moved = jnp.linalg.norm(new.positions - old.positions, axis=-1)
-        turned = jnp.abs(new.directors - old.directors)
+        turned = jnp.abs(new.directors - old.directors)  # 2D: angles; 3D: the chord of the unit tangents
+        turned = turned if net.dim == 2 else 1.1 * jnp.linalg.norm(turned, axis=-1)
         turned = 1.5 * jnp.maximum(turned[a], turned[b])  # the turn inside a segment, with a margin
         reach = jnp.maximum(moved[a], moved[b]) + net.lengths * turned  # [S]
         _, gaps, _, _, _, both_old, _ = self._contact_parts(old, Control.make())

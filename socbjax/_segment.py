@@ -52,7 +52,7 @@ from jaxtyping import Array, Float
 from ._geometry import minimal_rotation, orthonormal_complement, sphere_exp, sphere_exp_differential_inverse, sphere_log_jet
 from ._quadrature import SegmentQuadrature
 
-__all__ = ["frame_angle", "kirchhoff_segment_curve", "planar_turn", "turned_director", "planar_segment_residual", "spatial_segment_residual", "spatial_segment_tangents", "planar_segment_angles",
+__all__ = ["chart_data", "end_jet", "kirchhoff_jet", "frame_angle", "kirchhoff_segment_curve", "planar_turn", "turned_director", "planar_segment_residual", "spatial_segment_residual", "spatial_segment_tangents", "planar_segment_angles",
            "planar_segment_curve", "spatial_segment_curve"]
 
 
@@ -114,7 +114,9 @@ def planar_segment_residual(
     return jnp.concatenate([length_eq, moment_eq[None], bending_eq[None]])
 
 
-def _end_jet(t, m, n, EI):
+def end_jet(t, m, n, EI):
+    """(unit t, t' 1/µm, t'' 1/µm²) at a segment end of a torsion-free rod under the internal
+    force n (pN) with moment m (pN·µm)."""
     t = t / jnp.linalg.norm(t)
     dt = jnp.cross(m, t) / EI
     ddt = (jnp.dot(n, t) * t - n) / EI - jnp.dot(dt, dt) * t
@@ -123,11 +125,11 @@ def _end_jet(t, m, n, EI):
 
 def _spatial_interpolant(t_a, m_a, t_b, m_b, n, length, EI, basis):
     """Mean tangent u, chart data w_a, w_b and the chart coordinates w at the basis points."""
-    u, w_a, w_b, data = _chart(_end_jet(t_a, m_a, n, EI), _end_jet(t_b, m_b, n, EI), length)
+    u, w_a, w_b, data = chart_data(end_jet(t_a, m_a, n, EI), end_jet(t_b, m_b, n, EI), length)
     return u, w_a, w_b, basis @ data
 
 
-def _chart(jet_a, jet_b, length):
+def chart_data(jet_a, jet_b, length):
     """(u, w_a, w_b, Hermite data [6, 3]) of the log-chart quintic from the end jets (t, t', t'')."""
     (t_a, dt_a, ddt_a), (t_b, dt_b, ddt_b) = jet_a, jet_b
     u = t_a + t_b
@@ -161,9 +163,9 @@ def _kirchhoff_interpolant(t_a, m_a, t_b, m_b, n, length, EI, basis, dbasis, twi
     """(u, w_a, w_b, w, t, t', unit t_a, unit t_b) of a twisting segment's chart quintic,
     from end jets that carry the natural curvature on the material frame."""
     psi_a, psi_b, e_a, e_b, GJ, kappa0 = twist
-    jet_a = _kirchhoff_jet(t_a, e_a, psi_a, m_a, n, EI, GJ, kappa0)
-    jet_b = _kirchhoff_jet(t_b, e_b, psi_b, m_b, n, EI, GJ, kappa0)
-    u, w_a, w_b, data = _chart(jet_a, jet_b, length)
+    jet_a = kirchhoff_jet(t_a, e_a, psi_a, m_a, n, EI, GJ, kappa0)
+    jet_b = kirchhoff_jet(t_b, e_b, psi_b, m_b, n, EI, GJ, kappa0)
+    u, w_a, w_b, data = chart_data(jet_a, jet_b, length)
     w = basis @ data
     t, dt = _chart_tangents(u, w, dbasis @ data / length)
     return u, w_a, w_b, w, t, dt, jet_a[0], jet_b[0]
@@ -188,7 +190,7 @@ def turned_director(t, e, angle):
     return jnp.cos(angle) * e + jnp.sin(angle) * jnp.cross(t, e)
 
 
-def _kirchhoff_jet(t, e, psi, m, n, EI, GJ, kappa0):
+def kirchhoff_jet(t, e, psi, m, n, EI, GJ, kappa0):
     """End jet (t, t', t'') of a Kirchhoff rod and its material directors: t' = (m/EI + k) × t
     with the natural curvature vector k = κ₁ d1 + κ₂ d2, and t'' from m' = −t × n and
     k' = Ω × k (Ω = t × t' + τ t, τ = m·t/GJ + τ₀)."""

@@ -17,6 +17,8 @@ also when the actual values are traced.
 
 from __future__ import annotations
 
+import dataclasses
+
 import equinox as eqx
 import jax
 import jax.numpy as jnp
@@ -71,7 +73,7 @@ def template_model(model):
     fields = [getattr(model, f) for f in ("quad",) if hasattr(model, f)]
     contact = getattr(model, "contact", None)
     if contact is not None:  # every contact dependence switched on (no projection, no ownership)
-        return type(model)(net, *fields, contact=eqx.tree_at(lambda c: c.dense, contact, True))
+        return type(model)(net, *fields, contact=dataclasses.replace(contact, dense=True))
     return type(model)(net, *fields)
 
 

@@ -20,7 +20,7 @@ from ._progress import plural  # stdlib only
 
 __all__ = ["main", "build_parser"]
 
-# Defaults stop before the first node crosses the surface (no 3D contact yet): the unit mesh's mother at
+# Defaults stop before the first node crosses the surface (without --contact): the unit mesh's mother at
 # u ≈ 0.44 µm, the default 8-generation outcrop (seed 0) at u ≈ 0.33 µm (both with actin's twist).
 _DEFAULT_DISPLACEMENT = {"unit-mesh": 0.35, "outcrop": 0.2, "column": None}
 # The column's supports (socbjax.SUPPORTS, here without importing the solver); its default is
@@ -123,8 +123,8 @@ def _add_simulate(sub) -> None:
         "--contact",
         action=argparse.BooleanOptionalAction,
         default=False,
-        help="contact with the probe face and the substrate (rigid frictionless planes) and between filaments "
-        "(planar networks, --dim 2, so far) (default: --no-contact)",
+        help="contact with the probe face and the substrate (rigid frictionless planes), and between filaments "
+        "in planar networks (--dim 2; 3D: the surfaces only, so far) (default: --no-contact)",
     )
     sim.add_argument("--diameter", type=float, default=0.007, help="filament diameter for --contact in µm (default 0.007)")
     sim.add_argument("--resume", action="store_true", help="continue an interrupted run from OUT.ckpt.h5")
@@ -312,8 +312,6 @@ def _simulate(args) -> int:
     checkpoint = out.with_name(out.name + ".ckpt.h5")
     _check_outputs(args, out, checkpoint)
     net, params, default_u = _build(args)
-    if args.contact and net.dim != 2:
-        raise ValueError("--contact is built for planar networks so far: add --dim 2 (3D contact is the next step)")
     displacement = default_u if args.displacement is None else args.displacement
     steps = {} if args.max_step is None else dict(max_step=args.max_step, initial_step=min(0.02, args.max_step))
     settings = sj.PathSettings(linear_solver=args.linear_solver, **steps)
@@ -336,7 +334,7 @@ def _simulate(args) -> int:
             checkpoint=sj.Checkpoint(checkpoint, every=args.checkpoint_every, resume=args.resume and checkpoint.exists()),
             throw=False,
             parameters=params,
-            contact=sj.Contact(diameter=args.diameter) if args.contact else None,
+            contact=sj.Contact(diameter=args.diameter, self_contact=net.dim == 2) if args.contact else None,
         )
         sj.save(result, out)
         if checkpoint.exists():  # the path ended (whatever its result): a resume would only repeat it

@@ -175,7 +175,7 @@ def _user_error(capsys, argv) -> str:
     (["simulate", "column", "--out", "{tmp}"], ["--out", "folder"]),
     (["simulate", "column", "--displacement", "5", "--out", "{tmp}/c.h5"], ["gap"]),
     (["simulate", "unit-mesh", "--GJ", "-0.1", "--out", "{tmp}/c.h5"], ["--GJ", "'-0.1'", "'none'"]),
-    (["simulate", "column", "--contact", "--out", "{tmp}/c.h5"], ["--contact", "--dim 2"]),
+    (["simulate", "column", "--contact", "--diameter", "-1", "--out", "{tmp}/c.h5"], ["diameter", "-1"]),
     (["plot", "{tmp}/nothing.h5"], ["nothing.h5"]),
     (["plot", "{tmp}/not-hdf5.h5"], ["not-hdf5.h5", "not a valid socbjax result"]),
     (["plot", "{tmp}/not-hdf5.h5", "--steps", "1,x"], ["--steps"]),

@@ -137,8 +137,11 @@ def test_contact_input_errors_name_the_argument():
         sj.Contact(capacity=0)
     with pytest.raises(ValueError, match="self_contact=False"):
         sj.Contact(lumped=True)
-    with pytest.raises(NotImplementedError, match="3D"):
-        sj.solve(sj.cantilever(3), forces={-1: [0, -1.0, 0]}, contact=sj.Contact(self_contact=False))
+    with pytest.raises(NotImplementedError, match="self_contact=False"):  # 3D: obstacles only so far
+        sj.solve(sj.cantilever(3), forces={-1: [0, -1.0, 0]}, contact=sj.Contact())
+    curved = sj.cantilever(3, GJ=1.0, natural_curvature=[0.5, 0.0, 0.0])
+    with pytest.raises(NotImplementedError, match="natural curvature"):
+        sj.solve(curved, forces={-1: [0, -1.0, 0]}, contact=sj.Contact(self_contact=False))
     with pytest.raises(ValueError, match="3D but the network is 2D"):
         sj.solve(net2, contact=sj.Contact(planes=(sj.Plane([0, 0, 0], [0, 0, 1]),), self_contact=False))
 
