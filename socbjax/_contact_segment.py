@@ -36,7 +36,8 @@ from ._contact import penalty_force
 from ._quadrature import coupling_matrix
 
 __all__ = ["ContactSetup", "SLOT_WIDTH", "planar_contact_segment", "segment_jumps", "contact_segment_rows", "initial_slots", "handover_weight",
-           "smoothstep", "location_bias", "near_weight", "contact_slot_rows", "signed_distance"]
+           "smoothstep", "location_bias", "near_weight", "contact_slot_rows", "signed_distance", "jump_corrections",
+           "corrected_quintic"]
 
 _MINV = np.linalg.inv(coupling_matrix(1.0))  # Hermite data (σ-units) -> monomial coefficients
 _POW = np.arange(6)
@@ -111,21 +112,23 @@ def segment_jumps(sigma, theta, kappa, forces, n_a, length, EI):
     return jump * length ** _JUMP_ORDERS / _FACT
 
 
-def _corrections(x, sigma, a):
-    """(C, dC/dσ, d²C/dσ²) at the points x [P] of Σ_k Σ_j a_kj (σ − σ_k)₊^j."""
-    z = jnp.maximum(x[:, None] - sigma[None, :], 0.0)[..., None]  # [P, C, 1]
+def jump_corrections(x, sigma, a):
+    """(C, dC/dσ, d²C/dσ²) at the points x [P] of Σ_k Σ_j a_kj (σ − σ_k)₊^j: a [Q, 4] (planar
+    angle) or [Q, 4, d] (a vector chart coordinate), j = 2..5."""
+    z = jnp.maximum(x[:, None] - sigma[None, :], 0.0)[..., None]  # [P, Q, 1]
     j = _JUMP_ORDERS
-    value = jnp.sum(a * z**j, axis=(1, 2))
-    first = jnp.sum(a * j * z ** (j - 1), axis=(1, 2))
-    second = jnp.sum(a * j * (j - 1) * z ** (j - 2), axis=(1, 2))
+    value = jnp.einsum("pqj,qj...->p...", z**j, a)
+    first = jnp.einsum("pqj,qj...->p...", j * z ** (j - 1), a)
+    second = jnp.einsum("pqj,qj...->p...", j * (j - 1) * z ** (j - 2), a)
     return value, first, second
 
 
-def _angle(x, coef, sigma, a):
-    """(θ, dθ/dσ) at the points x [P] of the corrected quintic."""
+def corrected_quintic(x, coef, sigma, a):
+    """(value, d/dσ) at the points x [P] of the quintic with monomial coefficients ``coef``
+    ([6] or [6, d]) plus the jump corrections a (:func:`jump_corrections`)."""
     mono = x[:, None] ** _POW
     dmono = _POW * x[:, None] ** np.maximum(_POW - 1, 0)
-    value, first, _ = _corrections(x, sigma, a)
+    value, first, _ = jump_corrections(x, sigma, a)
     return mono @ coef + value, dmono @ coef + first
 
 
@@ -171,7 +174,7 @@ def planar_contact_segment(ends, n_a, length, EI, kappa0, slots, owns_start, own
         F_node, F = F * s[:, None], jnp.zeros_like(F)
     a = segment_jumps(s, theta_k, kappa_k, F, n_a, length, EI)
     n_b = n_a - jnp.sum(F, axis=0)
-    end_c, end_d1, end_d2 = _corrections(jnp.ones(1), s, a)
+    end_c, end_d1, end_d2 = jump_corrections(jnp.ones(1), s, a)
     data = jnp.stack([theta_a, length * (m_a / EI + kappa0), -length**2 * _cross(theta_a, n_a) / EI,
                       theta_a + turn - end_c[0], length * (m_b / EI + kappa0) - end_d1[0],
                       -length**2 * _cross(theta_a + turn, n_b) / EI - end_d2[0]])
@@ -181,7 +184,7 @@ def planar_contact_segment(ends, n_a, length, EI, kappa0, slots, owns_start, own
     widths = jnp.diff(breaks)
     x = (breaks[:-1, None] + widths[:, None] * jnp.asarray(quad.points)[None, :]).ravel()
     W = (widths[:, None] * jnp.asarray(quad.weights)[None, :]).ravel()
-    theta, _ = _angle(x, coef, s, a)
+    theta, _ = corrected_quintic(x, coef, s, a)
     t = jnp.stack([jnp.cos(theta), jnp.sin(theta)], axis=-1)
     after = (x[None, :] > s[:, None]).astype(x.dtype)  # [Q, P]
     chord = r_b - r_a
@@ -193,7 +196,7 @@ def planar_contact_segment(ends, n_a, length, EI, kappa0, slots, owns_start, own
     bending_eq = (EI * (turn - kappa0 * length) - (m_a * length - _cross2(lever, n_a) + jnp.sum(_cross2(tail, F)))) / EI
     seg_rows = jnp.concatenate([length_eq, moment_eq[None], bending_eq[None]])
     points = r_a + length * ((1.0 - after) * W) @ t  # r_k
-    theta_at, dtheta_at = _angle(s, coef, s, a)
+    theta_at, dtheta_at = corrected_quintic(s, coef, s, a)
     tangent = jnp.stack([jnp.cos(theta_k[:C]), jnp.sin(theta_k[:C])], axis=-1)
     bend = kappa_k[:C, None] * jnp.stack([-tangent[:, 1], tangent[:, 0]], axis=-1)  # t' = κ n
     shape = jnp.stack([theta_k[:C] - theta_at[:C], length * kappa_k[:C] - dtheta_at[:C]], axis=1)

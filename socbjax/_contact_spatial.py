@@ -31,7 +31,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from ._contact_segment import ContactSetup, contact_slot_rows
+from ._contact_segment import ContactSetup, contact_slot_rows, corrected_quintic, jump_corrections
 from ._geometry import minimal_rotation, orthonormal_complement, sphere_exp, sphere_exp_differential_inverse
 from ._quadrature import coupling_matrix
 from ._segment import chart_data, end_jet, frame_angle, kirchhoff_jet, planar_turn
@@ -41,7 +41,6 @@ __all__ = ["SPATIAL_SLOT_WIDTH", "spatial_jumps", "spatial_contact_segment", "sp
 
 SPATIAL_SLOT_WIDTH = 10  # unknowns per 3D slot: σ, F (3), t (3), t' (3)
 _MINV = np.linalg.inv(coupling_matrix(1.0))  # Hermite data (σ-units) -> monomial coefficients
-_POW = np.arange(6)
 _JUMP_ORDERS = np.arange(2, 6)
 
 
@@ -141,24 +140,6 @@ def spatial_jumps(u, sigma, tangents, rates, twist_moment, forces, n_a, length, 
     return jump * (length ** _JUMP_ORDERS)[None, :, None]
 
 
-def _corrections(x, sigma, a):
-    """(C [P, 3], dC/dσ, d²C/dσ²) at the points x [P] of Σ_k Σ_j a_kj (σ − σ_k)₊^j."""
-    z = jnp.maximum(x[:, None] - sigma[None, :], 0.0)[..., None]  # [P, C, 1]
-    j = _JUMP_ORDERS
-    value = jnp.einsum("pcj,cjd->pd", z**j, a)
-    first = jnp.einsum("pcj,cjd->pd", j * z ** (j - 1), a)
-    second = jnp.einsum("pcj,cjd->pd", j * (j - 1) * z ** (j - 2), a)
-    return value, first, second
-
-
-def _chart_at(x, coef, sigma, a):
-    """(w [P, 3], dw/dσ [P, 3]) of the corrected quintic at the points x [P]."""
-    mono = x[:, None] ** _POW
-    dmono = _POW * x[:, None] ** np.maximum(_POW - 1, 0)
-    value, first, _ = _corrections(x, sigma, a)
-    return mono @ coef + value, dmono @ coef + first
-
-
 def _composite_offsets(t, widths, quad, length):
     """r(x_p) − r_a [P, 3] at the composite quadrature points (pieces of ``widths``)."""
     K = len(quad.points)
@@ -184,7 +165,7 @@ def _interpolant(ends, n_a, F, s, tangents, rates, length, EI, twist, template=F
         twist_moment = jnp.dot(m_a, jet_a[0])
     u, w_a, w_b, data = chart_data(jet_a, jet_b, length)
     a = spatial_jumps(u, s, tangents, rates, twist_moment, F, n_a, length, EI, template)
-    end = [c[0] for c in _corrections(jnp.ones(1), s, a)]
+    end = [c[0] for c in jump_corrections(jnp.ones(1), s, a)]
     data = data - jnp.stack([jnp.zeros(3), jnp.zeros(3), jnp.zeros(3), end[0], end[1], end[2]])
     return u, w_a, w_b, jnp.asarray(_MINV) @ data, a, jet_a[0], jet_b[0], twist_moment
 
@@ -217,7 +198,7 @@ def spatial_contact_segment(ends, n_a, length, EI, frame, slots, owns_start, own
     widths = jnp.diff(breaks)
     x = (breaks[:-1, None] + widths[:, None] * jnp.asarray(quad.points)[None, :]).ravel()
     W = (widths[:, None] * jnp.asarray(quad.weights)[None, :]).ravel()
-    w, dw = _chart_at(x, coef, s, a)
+    w, dw = corrected_quintic(x, coef, s, a)
     t, dt = jax.vmap(lambda wk, dwk: jax.jvp(lambda z: sphere_exp(u, z), (wk,), (dwk / length,)))(w, dw)
     after = (x[None, :] > s[:, None]).astype(x.dtype)  # [C, P]
     offsets = _composite_offsets(t, widths, quad, length)  # r(x_p) − r_a
@@ -235,7 +216,7 @@ def spatial_contact_segment(ends, n_a, length, EI, frame, slots, owns_start, own
             perp(EI * (w_b - w_a) - length * (W @ rates_w)) / EI]
     if twist is not None:
         rows.append(_twist_rows(u, t, dt, m, W, t_a, t_b, twist, balance, length, EI))
-    w_k, dw_k = _chart_at(s, coef, s, a)
+    w_k, dw_k = corrected_quintic(s, coef, s, a)
     t_k, dt_k = jax.vmap(lambda wk, dwk: jax.jvp(lambda z: sphere_exp(u, z), (wk,), (dwk,)))(w_k, dw_k)
     shape = jnp.concatenate([tangents - t_k, length * rates - dt_k], axis=1)
     slot_rows, gaps = contact_slot_rows((r_a, r_b, t_a, t_b), r_a + arms, s, sigma, slots[:, 1:4], tangents, rates,
