@@ -72,13 +72,16 @@ def figure(c: dict, f: dict, d: float, args, title: str) -> None:
     ax.legend(fontsize=8)
     ax2 = ax.twinx()
     ax2.plot(c["u"], c["count"], color="C3", lw=0.9, ls="--")
-    ax2.set_ylabel("contacts carrying force", color="C3")
+    ax2.set_ylim(0, max(1, int(np.max(c["count"]))) * 1.1)
+    ax2.yaxis.get_major_locator().set_params(integer=True)
+    ax2.set_ylabel("contacts carrying force (dashed)", color="C3")
     ax = axes[1]
     gap = np.where(np.isfinite(c["min_gap"]), c["min_gap"], np.nan) * 1e3
     ax.plot(c["u"], gap, ".", ms=3, color="C0")
     ax.axhline(-0.01 * d * 1e3, color="C3", lw=0.8, ls="--", label="bound: −1 % of d")
+    ax.axhline(0.1 * d * 1e3, color="0.4", lw=0.8, ls=":", label="activation δ = d/10 (force on below)")
     ax.axhline(0.0, color="0.6", lw=0.8)
-    ax.set_ylim(-0.05 * d * 1e3, 0.5 * d * 1e3)
+    ax.set_yscale("symlog", linthresh=0.1)
     ax.set_xlabel("probe displacement u (µm)")
     ax.set_ylabel("smallest surface gap (nm)")
     ax.set_title("smallest gap to the probe face or substrate", fontsize=9)

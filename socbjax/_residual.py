@@ -364,13 +364,14 @@ class SOCBModel(eqx.Module):
         return socb_residual(state, self.network, control, frames, self.quad, self.contact)
 
     def contact_geometry(self, state: SOCBState, control: Control | None = None):
-        """Contact slots of ``state`` (2D contact models): (points [c, 2] µm, gaps [c] µm,
-        forces on the filament [c, 2] pN, counted [c] bool, end forces [S, 2] pN, nodal loads
-        of lumped contact [N, 2] pN) over the c = S·C obstacle slots, then the P pair slots
-        (their point on segment i; force on i).
+        """Contact slots of ``state``: (points [c, d] µm, gaps [c] µm, forces on the filament
+        [c, d] pN, counted [c] bool, end forces [S, d] pN, nodal loads of lumped contact [N, d]
+        pN) over the c = S·C obstacle slots, then (2D) the P pair slots (their point on
+        segment i; force on i).
         A slot is not counted where it sits on the start node of a segment inside a filament
         (the segment ending there reports that point) or on a node anchored on the obstacle
-        (a probe tip on the probe face), nor where a pair slot is empty."""
+        (a probe tip on the probe face), nor on a segment anchored on it, nor where a pair slot
+        is empty."""
         parts = self._contact_parts(state, Control.make() if control is None else control)
         return (*parts[:5], parts[6])
 
