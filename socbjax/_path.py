@@ -172,7 +172,7 @@ class PathSettings(eqx.Module):
     def newton(self, inner) -> DampedNewton:
         """The corrector: :class:`DampedNewton` on the bordered system with ``inner``."""
         return DampedNewton(atol=self.atol, max_iterations=self.max_iterations, max_backtracks=self.max_backtracks,
-                            linear_solver=Bordered(inner))
+                            linear_solver=Bordered(inner), step_limit=_corrector_limit)
 
 
 LOAD_RAMP = dict(method="natural", initial_step=0.25, min_step=1e-6, max_step=1.0, max_steps=500, max_attempts=5000,
@@ -238,6 +238,21 @@ class PathProblem(eqx.Module):
         if test is None:
             return jnp.asarray(True), jnp.asarray(False)
         return test(self.unravel()(x0), self.unravel()(x1))
+
+    def step_limit(self, y0, y1):
+        """The largest fraction α ∈ (0, 1] of a Newton step y0 → y1 ([x; p] each) that the
+        model admits (:meth:`socbjax.SOCBModel.newton_step_limit`; 1 without one)."""
+        test = getattr(self.model, "newton_step_limit", None)
+        if test is None:
+            return jnp.ones((), y0.dtype)
+        at = lambda y: self.control0.towards(self.control1, y[-1])  # noqa: E731
+        return test(self.unravel()(y0[:-1]), self.unravel()(y1[:-1]), at(y0), at(y1))
+
+
+def _corrector_limit(y, direction, args):
+    """The largest fraction of a corrector step y → y + direction that the problem admits
+    (:meth:`PathProblem.step_limit`; ``args`` as for :func:`_corrector_fn`)."""
+    return args[0].step_limit(y, y + direction)
 
 
 def _norm(weights, v):

@@ -432,6 +432,25 @@ class SOCBModel(eqx.Module):
         ok = ok & jnp.all(~near | same_side) & (2.0 * jnp.max(reach) < c.reach)
         return ok, self.pair_list(new).overflow
 
+    def newton_step_limit(self, old: SOCBState, new: SOCBState, control_old: Control, control_new: Control):
+        """The largest fraction α ∈ [0.01, 1] of a Newton step old → new (gaps taken linear
+        along it) after which no counted contact gap g lies below 2 g₀ − 5δ/4 (g₀ its gap
+        at ``old``, δ the activation distance): a gap outside the band may enter it by δ/4
+        (force ≤ kδ/192), one inside may at most double its depth 1 − g/δ (plus ¼).  Outside
+        the band the linearisation sees no contact force, so an unlimited step would carry a
+        node deep into the stiff penalty, whose residual Newton then reduces only linearly
+        (the step-length filter of IPC, for a penalty instead of a barrier).  1 without
+        contact."""
+        if self.contact is None:
+            return jnp.ones(())
+        _, g0, _, counted = self.contact_geometry(old, control_old)[:4]
+        g1 = self.contact_geometry(new, control_new)[1]
+        delta = self.contact.activation
+        lower = jnp.minimum(2.0 * g0 - 1.25 * delta, 0.75 * delta)
+        falls = counted & (g1 < lower) & (g0 > lower)
+        alpha = jnp.where(falls, (g0 - lower) / jnp.where(falls, g0 - g1, 1.0), 1.0)
+        return jnp.clip(jnp.min(alpha, initial=1.0), 0.01, 1.0)
+
     def contact_ends(self, state: SOCBState):
         """(internal force at each segment's end [S, d] pN, extra nodal loads [N, d] pN): the
         state's (start) forces less the segments' interior contact forces, and the loads that

@@ -98,6 +98,9 @@ class DampedNewton(optx.AbstractRootFinder):
     linear_solver : a socbjax solver (:class:`DenseLU`, :class:`ColouredSparseLU`,
         :class:`Bordered`) — they report sign(det J) — or any square ``lineax`` solver.
     armijo : sufficient-decrease fraction.
+    step_limit : None, or ``step_limit(y, direction, args)`` → the largest fraction α ∈ (0, 1]
+        of a Newton step the problem admits (contact: no gap may jump deep into the contact
+        band in one step, IPC's step-length filter); backtracking starts from it.
     """
 
     atol: Any = 1e-12
@@ -107,6 +110,7 @@ class DampedNewton(optx.AbstractRootFinder):
     armijo: float = 1e-4
     rtol: float = 0.0  # optimistix's interface; unused (the test is on ‖f‖∞ alone)
     norm: Callable = _inf_norm
+    step_limit: Callable | None = None
 
     def init(self, fn, y, args, options, f_struct, aux_struct, tags) -> NewtonState:
         del fn, args, options, aux_struct, tags
@@ -148,7 +152,11 @@ class DampedNewton(optx.AbstractRootFinder):
         bad_direction = accepted & ~converged & ~jnp.all(jnp.isfinite(direction))
         iterations = state.iterations + jnp.where(accepted & ~first, 1, 0)
         backtracks = jnp.where(accepted, 0, state.backtracks + 1)
-        alpha = jnp.where(accepted, 1.0, 0.5 * state.alpha)
+        first_alpha = 1.0
+        if self.step_limit is not None:  # only after a new direction (a backtrack halves α instead)
+            first_alpha = jax.lax.cond(factors, lambda _: jnp.asarray(self.step_limit(y, direction, args), y.dtype),
+                                       lambda _: jnp.ones((), y.dtype), None)
+        alpha = jnp.where(accepted, first_alpha, 0.5 * state.alpha)
         base = jnp.where(accepted, y, state.accepted)
         result = RESULTS.where(first & ~finite, RESULTS.nonfinite, RESULTS.successful)
         result = RESULTS.where(bad_direction, RESULTS.singular, result)
