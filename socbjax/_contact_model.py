@@ -26,7 +26,9 @@ ANCHOR_TOLERANCE = 1e-9
 
 
 def _obstacle_table(network: Network, contact: Contact):
-    """(kinds, points [C, d], normals [C, d], radii [C], moving [C]) of every obstacle."""
+    """(kinds, points [C, d], normals [C, d], radii [C], moving [C], surface [C]) of every
+    obstacle; ``surface`` is 1 for the probe face and the substrate (placed through the
+    anchored tips and bases here; :func:`contact_setup` moves them back by d/2 + δ)."""
     d = network.dim
     kinds, points, normals, radii, moving = [], [], [], [], []
     if contact.surfaces and network.has_probe:
@@ -37,6 +39,7 @@ def _obstacle_table(network: Network, contact: Contact):
             faces.append((origin + gap * axis, -axis, 0.0))
         for point, normal, move in faces:
             kinds.append("plane"), points.append(point), normals.append(normal), radii.append(0.0), moving.append(move)
+    n_faces = len(kinds)
     for plane in contact.planes:
         kinds.append("plane"), points.append(plane.point), normals.append(plane.normal), radii.append(0.0)
         moving.append(0.0)
@@ -44,7 +47,9 @@ def _obstacle_table(network: Network, contact: Contact):
         kinds.append("sphere"), points.append(sphere.center), normals.append(np.zeros(d)), radii.append(sphere.radius)
         moving.append(0.0)
     stack = lambda rows: jnp.reshape(jnp.asarray(rows, jnp.float64), (-1, d))  # noqa: E731
-    return tuple(kinds), stack(points), stack(normals), jnp.asarray(radii, jnp.float64), jnp.asarray(moving, jnp.float64)
+    surface = np.arange(len(kinds)) < n_faces
+    return (tuple(kinds), stack(points), stack(normals), jnp.asarray(radii, jnp.float64),
+            jnp.asarray(moving, jnp.float64), surface.astype(float))
 
 
 def _segment_roles(network: Network) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -121,10 +126,6 @@ def _beside_anchors(network: Network, anchored, owns_start, owns_end, smooth_sta
 
 def _check_spatial(network: Network, contact: Contact) -> None:
     """Refuse what 3D contact does not do yet, naming the fix."""
-    if contact.self_contact:
-        raise NotImplementedError("filament–filament and self-contact are built for planar (2D) networks so far; in 3D "
-                                  "use socbjax.Contact(self_contact=False, ...) (the probe face, the substrate, planes "
-                                  "and spheres)")
     if network.twisting:
         kappa = network.natural_curvature
         if not isinstance(kappa, jax.core.Tracer) and np.any(np.asarray(kappa)[:, :2] != 0):
@@ -148,13 +149,20 @@ def contact_setup(network: Network, contact: Contact | None, *, dense: bool = Fa
         if obstacle.dim != network.dim:
             raise ValueError(f"contact obstacle {i} is {obstacle.dim}D but the network is {network.dim}D; give points "
                              f"and normals with {network.dim} components")
-    kinds, points, normals, radii, moving = _obstacle_table(network, contact)
+    kinds, points, normals, radii, moving, surface = _obstacle_table(network, contact)
     free_base, smooth_start, smooth_end = _segment_roles(network)
     owns_start, owns_end, anchored = _ownership(network, kinds, points, normals, radii, free_base)
-    slot_roles = _beside_anchors(network, anchored, owns_start, owns_end, smooth_start, smooth_end)
+    # The probe face and the substrate lie d/2 + δ beyond the anchored tips and bases: an
+    # anchored axis end then sits at the band's edge (no force), and the anchored segments obey
+    # the contact law like every other (their interior cannot dip through).  Other obstacles
+    # with anchored nodes exempt the anchored segments (docs/equations.md "Anchored segments").
+    exempt = anchored * (1.0 - jnp.asarray(surface))[None, :]
+    slot_roles = _beside_anchors(network, exempt, owns_start, owns_end, smooth_start, smooth_end)
     seg = np.asarray(network.segments)
     EI, length = jnp.mean(network.EI), jnp.mean(network.lengths)
     delta, k = contact.law(EI)
+    points = points - ((contact.diameter / 2 + delta) * jnp.asarray(surface))[:, None] * normals
+    pinned = jnp.where(anchored[seg[:, 0]] > 0, 1.0, 2.0 * anchored[seg[:, 1]]) * jnp.asarray(surface)[None, :]
     f = lambda v: jnp.asarray(v, jnp.float64)  # noqa: E731
     S = network.n_segments
     capacity = (max(8, S) if contact.capacity is None else contact.capacity) if contact.self_contact else 0
@@ -162,7 +170,7 @@ def contact_setup(network: Network, contact: Contact | None, *, dense: bool = Fa
     return ContactSetup(kinds=kinds, points=f(points), normals=f(normals), radii=f(radii), moving=f(moving),
                         owns_start=f(slot_roles[0]), owns_end=f(slot_roles[1]), slot_smooth_start=f(slot_roles[2]),
                         slot_smooth_end=f(slot_roles[3]),
-                        active=f(1.0 - jnp.maximum(anchored[seg[:, 0]], anchored[seg[:, 1]])),
+                        active=f(1.0 - jnp.maximum(exempt[seg[:, 0]], exempt[seg[:, 1]])), pinned=f(pinned),
                         filament_radius=f(contact.diameter / 2),
                         activation=f(delta), stiffness=f(k), force_scale=f(EI / length**2),
                         smooth_start=f(smooth_start), smooth_end=f(smooth_end), seg_owns_start=f(free_base),

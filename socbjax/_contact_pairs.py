@@ -1,15 +1,18 @@
-"""Filament–filament and self-contact (planar): the broad phase, the pair slots and their rows.
+"""Filament–filament and self-contact (2D and 3D): the broad phase, the pair slots and their rows.
 
 Every pair of non-adjacent segments that may touch gets a *pair slot* in a list of fixed
-capacity P (``Contact(capacity=...)``): the two segments' ids, and eight unknowns: the
-locations σ_i, σ_j of the closest points of the two smooth curves, the contact force F on
-segment i (−F acts on j, pN), and θ, κ at both points (as the obstacle slots of
-:mod:`socbjax._contact_segment`, whose segment kernel carries both forces exactly).
+capacity P (``Contact(capacity=...)``): the two segments' ids, the locations σ_i, σ_j of the
+closest points of the two smooth curves, the contact force F on segment i (−F acts on j, pN),
+and the shape data at both points that the interior-force jumps need: θ, κ in 2D (as the
+obstacle slots of :mod:`socbjax._contact_segment`); in 3D the chart coordinate w and its
+arc-length derivative w′ of each point in its own segment's log chart (t = exp_u w is then a
+unit tangent for any value, and a fresh slot's w = 0 is the chart's centre, so stale or empty
+values never reach the chart's singularity).  The segment kernels carry both forces exactly.
 
 Broad phase (a spatial hash, jax-md style, fixed capacity): a segment's curve lies inside the
-circle of radius l/2 around its chord's midpoint (inextensible: |p − a| + |p − b| ≤ l for every
-point p, an ellipse inside that circle).  Segments are hashed to square cells of side
-max l + d + reach; each segment looks at its own and the 8 neighbouring cells (at most
+ball of radius l/2 around its chord's midpoint (inextensible: |p − a| + |p − b| ≤ l for every
+point p, an ellipsoid inside that ball).  Segments are hashed to square (cubic) cells of side
+max l + d + reach; each segment looks at its own and the 3^d − 1 neighbouring cells (at most
 2 ``per_segment`` segments per cell) and keeps partners j > i whose circles come within d + reach
 (``reach``: how far the next path step may move a segment, enforced by the path's
 admissibility test).  Segments sharing a node never pair.  The list is rebuilt from the state
@@ -31,10 +34,22 @@ import numpy as np
 from ._contact import penalty_force
 from ._contact_segment import handover_weight, location_bias, near_weight
 
-__all__ = ["PAIR_WIDTH", "PairList", "adjacent_segments", "broad_phase", "merge_pairs", "segment_table", "pair_extra",
+__all__ = ["PAIR_WIDTH", "SPATIAL_PAIR_WIDTH", "pair_width", "PairList", "adjacent_segments", "broad_phase", "merge_pairs", "segment_table", "pair_extra",
            "pair_rows", "initial_pairs"]
 
-PAIR_WIDTH = 10  # i, j (ids, as numbers), σ_i, σ_j, F_x, F_y, θ_i, κ_i, θ_j, κ_j
+PAIR_WIDTH = 10  # 2D: i, j (ids, as numbers), σ_i, σ_j, F_x, F_y, θ_i, κ_i, θ_j, κ_j
+# 3D: i, j, σ_i, σ_j, F (3), w_i, w'_i, w_j, w'_j (3 each): each side's chart coordinate and its
+# arc-length derivative (1/µm) in its own segment's log chart (socbjax._contact_spatial)
+SPATIAL_PAIR_WIDTH = 19
+
+
+def pair_width(dim: int) -> int:
+    """Unknowns (and rows) per pair slot: 10 in 2D, 19 in 3D."""
+    return PAIR_WIDTH if dim == 2 else SPATIAL_PAIR_WIDTH
+
+
+def _side_width(dim: int) -> int:
+    return 2 if dim == 2 else 6  # (θ, κ) or (w, w')
 _OFFSET, _BASE = 2**19, 2**20  # integer cell coordinates -> one int64 key
 
 
@@ -137,23 +152,30 @@ def segment_table(ids, n_segments: int, per_segment: int):
 
 
 def pair_extra(pairs, table):
-    """[S, M, 5] interior point forces (σ, F, θ, κ) that the pairs put on each segment."""
+    """Interior point forces that the pairs put on each segment: [S, M, 5] (σ, F, θ, κ) in 2D,
+    [S, M, 10] (σ, F, w, w') in 3D (chart coordinates of the segment's own chart)."""
+    dim = 2 if pairs.shape[-1] == PAIR_WIDTH else 3
+    b = _side_width(dim)
     p, side = jnp.maximum(table[..., 0], 0), jnp.maximum(table[..., 1], 0)
-    row = pairs[p]  # [S, M, PAIR_WIDTH]
+    row = pairs[p]  # [S, M, width]
     sign = jnp.where(side == 0, 1.0, -1.0)[..., None]
     used = (table[..., 0] >= 0)[..., None]
-    take = lambda col: jnp.take_along_axis(row, col[..., None], axis=-1)  # noqa: E731
-    extra = jnp.concatenate([take(2 + side), sign * row[..., 4:6], take(6 + 2 * side), take(7 + 2 * side)], axis=-1)
-    idle = jnp.asarray([0.5, 0.0, 0.0, 0.0, 0.0])
+    columns = 4 + dim + side[..., None] * b + jnp.arange(b)  # the side's shape block
+    shape = jnp.take_along_axis(row, columns, axis=-1)
+    sigma = jnp.take_along_axis(row, (2 + side)[..., None], axis=-1)
+    extra = jnp.concatenate([sigma, sign * row[..., 4:4 + dim], shape], axis=-1)
+    idle = jnp.zeros(1 + dim + b).at[0].set(0.5)
     return jnp.where(used, extra, idle)
 
 
 def pair_rows(pairs, frame: PairList, outputs, network, setup, nodes):
-    """Rows [P, PAIR_WIDTH] of the pair slots (dimensionless), their gaps [P] (µm; +inf for
-    empty slots) and points [P, 2 sides, 2] (µm).  ``outputs``: the segment kernel's (points
-    [S, M, 2], θ [S, M], dθ/dσ [S, M]) at the pairs' points; ``nodes``: (positions [N, 2] µm,
-    angles [N] rad) of the state."""
-    points, theta_at, dtheta_at = outputs
+    """Rows [P, width] of the pair slots (dimensionless), their gaps [P] (µm; +inf for empty
+    slots) and points [P, 2 sides, d] (µm).  ``outputs``: the segment kernel's values at the
+    pairs' points, planar (points [S, M, 2], θ [S, M], dθ/dσ [S, M]) or spatial (points, unit
+    tangents, chart coordinates w, dw/dσ: [S, M, 3] each); ``nodes``: (positions [N, d] µm,
+    directors: angles [N] rad or unit tangents [N, 3]) of the state."""
+    dim = network.dim
+    points = outputs[0]
     S, M = frame.table.shape[:2]
     P = pairs.shape[0]
     # where each (pair slot, side) sits in the segment table
@@ -162,23 +184,29 @@ def pair_rows(pairs, frame: PairList, outputs, network, setup, nodes):
         jnp.arange(S * M), mode="drop")
     valid = (frame.ids[:, 0] >= 0) & jnp.all(where < S * M, axis=1)
     at = jnp.clip(where, 0, S * M - 1)
-    r = points.reshape(-1, 2)[at]  # [P, 2 sides, 2]
-    th, dth = theta_at.reshape(-1)[at], dtheta_at.reshape(-1)[at]
+    gather = lambda v: v.reshape(S * M, *v.shape[2:])[at]  # noqa: E731  [P, 2 sides, ...]
+    r = gather(points)
     seg = jnp.clip(frame.ids, 0, S - 1)
-    length = network.lengths[seg]  # [P, 2]
-    sigma, F = pairs[:, 2:4], pairs[:, 4:6]
-    theta_k, kappa_k = pairs[:, 6:10:2], pairs[:, 7:10:2]
+    length = jnp.asarray(network.lengths)[seg]  # [P, 2]
+    sigma, F = pairs[:, 2:4], pairs[:, 4:4 + dim]
+    shape_k = pairs[:, 4 + dim:].reshape(P, 2, -1)  # per side: (θ, κ) or (w, w')
     diff = r[:, 0] - r[:, 1]
     dist = jnp.sqrt(jnp.sum(diff**2, axis=-1) + 1e-300)
     u = diff / dist[:, None]
     gaps = dist - 2.0 * setup.filament_radius
-    tangent = jnp.stack([jnp.cos(theta_k), jnp.sin(theta_k)], axis=-1)  # [P, 2, 2]
+    if dim == 2:
+        th, dth = gather(outputs[1]), gather(outputs[2])
+        tangent = jnp.stack([jnp.cos(shape_k[..., 0]), jnp.sin(shape_k[..., 0])], axis=-1)  # [P, 2, 2]
+        shape = jnp.stack([shape_k[..., 0] - th, length * shape_k[..., 1] - dth], axis=-1)  # [P, 2 sides, 2]
+    else:
+        tangent, w_at, dw_at = gather(outputs[1]), gather(outputs[2]), gather(outputs[3])
+        shape = jnp.concatenate([shape_k[..., :3] - w_at, length[..., None] * shape_k[..., 3:] - dw_at], axis=-1)
     slope = jnp.stack([jnp.sum(u * tangent[:, 0], -1), -jnp.sum(u * tangent[:, 1], -1)], axis=1)
     s = jnp.clip(sigma, 0.0, 1.0)
     bias = location_bias(sigma, gaps[:, None], length)
     # the band is judged on the pair's lowest possible gap (bounding circles of radius l/2
     # around the chords' midpoints), not on the gap at the current σ
-    r_nodes, angle_nodes = nodes
+    r_nodes, directors = nodes
     a, b = jnp.asarray(network.segments)[seg, 0], jnp.asarray(network.segments)[seg, 1]  # [P, 2]
     centers = 0.5 * (r_nodes[a] + r_nodes[b])
     lowest = (jnp.linalg.norm(centers[:, 0] - centers[:, 1], axis=-1) - 0.5 * jnp.sum(length, axis=1)
@@ -187,12 +215,15 @@ def pair_rows(pairs, frame: PairList, outputs, network, setup, nodes):
     location = near * (sigma - jnp.clip(sigma - slope - bias, 0.0, 1.0)) + (1.0 - near) * (sigma - 0.5)
     # each side's node hand-over (as for obstacles): the slope at its end nodes of the distance
     # to the other side's closest point
-    other = r[:, ::-1]  # [P, 2 sides, 2]
+    other = r[:, ::-1]  # [P, 2 sides, d]
+    if dim == 2:
+        node_tangent = lambda node: jnp.stack([jnp.cos(directors[node]), jnp.sin(directors[node])], -1)  # noqa: E731
+    else:
+        node_tangent = lambda node: directors[node] / jnp.linalg.norm(directors[node], axis=-1, keepdims=True)  # noqa: E731
 
     def node_slope(node):
         offset = r_nodes[node] - other
-        t = jnp.stack([jnp.cos(angle_nodes[node]), jnp.sin(angle_nodes[node])], axis=-1)
-        return jnp.sum(offset * t, axis=-1) / jnp.sqrt(jnp.sum(offset**2, axis=-1) + 1e-300)
+        return jnp.sum(offset * node_tangent(node), axis=-1) / jnp.sqrt(jnp.sum(offset**2, axis=-1) + 1e-300)
 
     slopes = jnp.stack([node_slope(a), node_slope(b)])  # [2 ends, P, 2 sides]
     one = jnp.ones_like(s)
@@ -200,16 +231,14 @@ def pair_rows(pairs, frame: PairList, outputs, network, setup, nodes):
                                                                                   setup.smooth_end[seg])), axis=1)
     magnitude = owned * penalty_force(gaps, setup.activation, setup.stiffness)
     force = (F - magnitude[:, None] * u) / setup.force_scale
-    rows = jnp.concatenate([location, force, theta_k[:, :1] - th[:, :1], length[:, :1] * kappa_k[:, :1] - dth[:, :1],
-                            theta_k[:, 1:] - th[:, 1:], length[:, 1:] * kappa_k[:, 1:] - dth[:, 1:]], axis=1)
-    idle = jnp.concatenate([sigma - 0.5, F / setup.force_scale, theta_k[:, :1], kappa_k[:, :1], theta_k[:, 1:],
-                            kappa_k[:, 1:]], axis=1)
+    rows = jnp.concatenate([location, force, shape.reshape(P, -1)], axis=1)
+    idle = jnp.concatenate([sigma - 0.5, F / setup.force_scale, pairs[:, 4 + dim:]], axis=1)
     rows = jnp.where(valid[:, None], rows, idle)
     id_rows = pairs[:, :2] - frame.ids.astype(pairs.dtype)  # the list is held during a step
     return jnp.concatenate([id_rows, rows], axis=1), jnp.where(valid, gaps, jnp.inf), jnp.where(valid[:, None, None], r, 0.0)
 
 
-def initial_pairs(capacity: int) -> jax.Array:
-    """[P, PAIR_WIDTH] empty pair slots (ids −1, σ = ½, no force)."""
-    one = jnp.asarray([-1.0, -1.0, 0.5, 0.5, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0])
-    return jnp.broadcast_to(one, (capacity, PAIR_WIDTH))
+def initial_pairs(capacity: int, dim: int = 2) -> jax.Array:
+    """[P, width] empty pair slots (ids −1, σ = ½, no force; 3D: w = 0, the chart's centre)."""
+    one = jnp.zeros(pair_width(dim)).at[:4].set(jnp.asarray([-1.0, -1.0, 0.5, 0.5]))
+    return jnp.broadcast_to(one, (capacity, pair_width(dim)))

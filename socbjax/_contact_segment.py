@@ -37,7 +37,7 @@ from ._quadrature import coupling_matrix
 
 __all__ = ["ContactSetup", "SLOT_WIDTH", "planar_contact_segment", "segment_jumps", "contact_segment_rows", "initial_slots", "handover_weight",
            "smoothstep", "location_bias", "near_weight", "contact_slot_rows", "signed_distance", "jump_corrections",
-           "corrected_quintic"]
+           "corrected_quintic", "rest_sigma"]
 
 _MINV = np.linalg.inv(coupling_matrix(1.0))  # Hermite data (σ-units) -> monomial coefficients
 _POW = np.arange(6)
@@ -50,6 +50,10 @@ _LOCATION_BIAS = 0.05
 # A node inside a filament is a closest point only where ∇φ·t = 0 there (the curve is C¹): the
 # force moves from one segment's slot to the next one's over this range of that slope.
 _HANDOVER = 0.02
+# A slot of a segment anchored on the probe face or the substrate follows the closest-point
+# projection where l d²φ/ds² exceeds this (an interior dip; the row's conditioning), and rests
+# on the free end below it: a dip it cannot see is shallower than l × this / 8.
+_PINNED_BEND = 0.005
 SLOT_WIDTH = 5  # unknowns per 2D slot: σ, F_x, F_y, θ, κ
 
 
@@ -73,6 +77,7 @@ class ContactSetup(eqx.Module):
     slot_smooth_start: jax.Array = None  # [S, C] the same per obstacle (0 next to a segment anchored on it)
     slot_smooth_end: jax.Array = None  # [S, C]
     active: jax.Array = None  # [S, C] 0 where the segment is anchored on the obstacle (no contact with it)
+    pinned: jax.Array = None  # [S, C] 1 / 2 where its start / end node is anchored on the probe face / substrate
     seg_owns_start: jax.Array = None  # [S] 1 where a segment owns its σ = 0 point (filament bases)
     adjacent: jax.Array = None  # [S, A] segments sharing a node (never a contact pair), −1 padded
     reach: jax.Array = None  # µm: how far beyond touching a pair enters the list (≥ 2 × a step's motion)
@@ -143,7 +148,7 @@ def signed_distance(setup: ContactSetup, k: int, r, displacement, axis):
 
 
 def planar_contact_segment(ends, n_a, length, EI, kappa0, slots, owns_start, owns_end, setup: ContactSetup,
-                           displacement, axis, quad, extra=None, smooth=(0.0, 0.0), active=1.0):
+                           displacement, axis, quad, extra=None, smooth=(0.0, 0.0), active=1.0, pinned=0.0):
     """One planar segment with its contact slots.
 
     ends : (r_a [2], θ_a, m_a, r_b [2], θ_b, m_b): positions µm, angles rad, moments pN·µm
@@ -203,7 +208,7 @@ def planar_contact_segment(ends, n_a, length, EI, kappa0, slots, owns_start, own
     unit = lambda th: jnp.stack([jnp.cos(th), jnp.sin(th)])  # noqa: E731
     slot_rows, gaps = contact_slot_rows((r_a, r_b, unit(theta_a), unit(theta_a + turn)), points[:C], s[:C], sigma[:C],
                                         slots[:, 1:3], tangent, bend, shape, length, owns_start, owns_end, setup,
-                                        displacement, axis, smooth, active)
+                                        displacement, axis, smooth, active, pinned)
     start_load = jnp.sum(every[:, 1:3] - F_node, axis=0) if setup.lumped else jnp.zeros(2)
     return (seg_rows, slot_rows, n_a - jnp.sum(F_node, axis=0), start_load, points[:C], gaps,
             (points[C:], theta_at[C:], dtheta_at[C:]))
@@ -265,7 +270,7 @@ def handover_weight(s, slopes, owns_start, owns_end, smooth):
 
 
 def contact_slot_rows(ends, points, s, sigma, F, tangent, bend, shape, length, owns_start, owns_end, setup,
-                      displacement, axis, smooth=(0.0, 0.0), active=1.0):
+                      displacement, axis, smooth=(0.0, 0.0), active=1.0, pinned=0.0):
     """Rows of the obstacle slots of one segment, planar or spatial (dimensionless), and their
     gaps [C] (µm).  ``ends`` = (r_a, r_b, unit t_a, unit t_b); ``points`` [C, d] the curve at
     the slots' σ (µm); ``s`` the σ projected onto [0, 1]; ``F`` [C, d] the slots' force
@@ -275,7 +280,14 @@ def contact_slot_rows(ends, points, s, sigma, F, tangent, bend, shape, length, o
     ``active`` [C]: 0 where the segment is anchored on the obstacle (a strand's base on the
     substrate, a tip on the probe face): its axis starts on the surface, inside d/2 of it by
     construction, so it has no contact with that obstacle (its slot rests at σ = ½); the
-    node at its free end belongs to the neighbouring segment."""
+    node at its free end belongs to the neighbouring segment.  ``pinned`` [C]: 1 (2) where the
+    segment's start (end) node is anchored on an obstacle that lies d/2 + δ beyond it (the probe
+    face, the substrate): that end sits at the band's edge and carries no force, so where the
+    distance along the segment is straight or concave its closest point that matters is the
+    free end (a node, shared with the neighbour by the usual hand-over), and where it is convex
+    the projection's minimum.  The slot rests on the free end and takes the closest-point
+    projection smoothly as l d²φ/ds² rises past ``_PINNED_BEND``: the rule never jumps between
+    the ends, and stays regular on a straight segment parallel to the surface."""
     C = setup.n_obstacles
     if C == 0:
         return jnp.zeros((0, 1 + F.shape[-1] + shape.shape[-1])), jnp.zeros(0)
@@ -302,7 +314,10 @@ def contact_slot_rows(ends, points, s, sigma, F, tangent, bend, shape, length, o
         location = slope + sigma + gaps
         magnitude = setup.force_scale * gaps * (1.0 + gaps)  # O(1) rows: the pattern check compares sums
     else:
-        closest = jnp.where(bend * length > 0, sigma - jnp.clip(sigma - slope - bias, 0.0, 1.0), sigma - nearer)
+        projected = sigma - jnp.clip(sigma - slope - bias, 0.0, 1.0)
+        closest = jnp.where(bend * length > 0, projected, sigma - nearer)
+        convex = smoothstep(bend * length / _PINNED_BEND)  # d(∇φ·t)/dσ: the projection row's slope
+        closest = jnp.where(pinned > 0, convex * projected + (1.0 - convex) * (sigma - (2.0 - pinned)), closest)
         # far from a plane the slot rests at the segment's middle (its force is 0 there
         # anyway): the closest-point rule, whose choice of branch may jump while a segment is
         # straight and parallel to the plane, takes over near it (:func:`near_weight`).  A
@@ -332,18 +347,19 @@ def contact_segment_rows(positions, angles, moments, m_start, forces, slots, net
 
     extra = jnp.zeros((network.n_segments, 0, SLOT_WIDTH)) if extra is None else extra
 
-    def one(end, n, length, EI, kappa0, slot, own_a, own_b, more, smooth_a, smooth_b, active):
+    def one(end, n, length, EI, kappa0, slot, own_a, own_b, more, smooth_a, smooth_b, active, pinned):
         return planar_contact_segment(end, n, length, EI, kappa0, slot, own_a, own_b, setup, control.displacement,
-                                      axis, quad, more, (smooth_a, smooth_b), active)
+                                      axis, quad, more, (smooth_a, smooth_b), active, pinned)
 
     return jax.vmap(one)(ends, forces, network.lengths, network.EI, network.natural_curvature, slots,
                          setup.owns_start, setup.owns_end, extra, setup.slot_smooth_start, setup.slot_smooth_end,
-                         setup.active)
+                         setup.active, setup.pinned)
 
 
 def initial_slots(network, setup: ContactSetup | None, angles) -> jax.Array:
-    """Slot unknowns [S, C, 5] of a force-free state: the segment middle (σ = ½), zero force,
-    the angle and curvature of the unloaded arc there; [S, 0, 5] without contact."""
+    """Slot unknowns [S, C, 5] of a force-free state: the segment middle (σ = ½; a pinned
+    slot's free end, where its row rests), zero force, the angle and curvature of the unloaded
+    arc there; [S, 0, 5] without contact."""
     C = 0 if setup is None else setup.n_obstacles
     S = network.n_segments
     if C == 0:
@@ -351,4 +367,10 @@ def initial_slots(network, setup: ContactSetup | None, angles) -> jax.Array:
     kappa0 = jnp.asarray(network.natural_curvature) if network.dim == 2 else jnp.zeros(S)
     theta = angles[network.segments[:, 0]] + 0.5 * kappa0 * network.lengths
     one = jnp.stack([jnp.full(S, 0.5), jnp.zeros(S), jnp.zeros(S), theta, kappa0], axis=1)
-    return jnp.broadcast_to(one[:, None, :], (S, C, SLOT_WIDTH))
+    slots = jnp.broadcast_to(one[:, None, :], (S, C, SLOT_WIDTH))
+    return slots.at[..., 0].set(rest_sigma(setup))
+
+
+def rest_sigma(setup: ContactSetup):
+    """[S, C] where each slot rests far from contact: ½, or a pinned slot's free end."""
+    return jnp.where(setup.pinned > 0, 2.0 - setup.pinned, 0.5)

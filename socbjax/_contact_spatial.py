@@ -31,7 +31,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from ._contact_segment import ContactSetup, contact_slot_rows, corrected_quintic, jump_corrections
+from ._contact_segment import ContactSetup, contact_slot_rows, corrected_quintic, jump_corrections, rest_sigma
 from ._geometry import minimal_rotation, orthonormal_complement, sphere_exp, sphere_exp_differential_inverse
 from ._quadrature import coupling_matrix
 from ._segment import chart_data, end_jet, frame_angle, kirchhoff_jet, planar_turn
@@ -150,9 +150,11 @@ def _composite_offsets(t, widths, quad, length):
     return length * (start[:, None, :] + within).reshape(-1, 3)
 
 
-def _interpolant(ends, n_a, F, s, tangents, rates, length, EI, twist, template=False):
+def _interpolant(ends, n_a, F, s, tangents, rates, length, EI, twist, template=False, chart=None):
     """(u, w_a, w_b, monomial coefficients [6, 3], jump coefficients [Q, 4, 3], unit t_a, unit
-    t_b, twisting moment) of a segment carrying the point forces F [Q, 3] at σ = s."""
+    t_b, twisting moment) of a segment carrying the point forces F [Q, 3] at σ = s.  The first
+    points have ``tangents`` and ``rates`` (t, t′); the last ones (``chart`` = (w, w′) [M, 3]
+    each, pair contacts) are given in the segment's own chart: t = exp_u(w), t′ = D exp_u(w)[w′]."""
     _, t_a, m_a, _, t_b, m_b = ends
     n_b = n_a - jnp.sum(F, axis=0)
     if twist is None:
@@ -164,6 +166,9 @@ def _interpolant(ends, n_a, F, s, tangents, rates, length, EI, twist, template=F
         jet_b = kirchhoff_jet(t_b, e_b, psi_b, m_b, n_b, EI, GJ, kappa0)
         twist_moment = jnp.dot(m_a, jet_a[0])
     u, w_a, w_b, data = chart_data(jet_a, jet_b, length)
+    if chart is not None and chart[0].shape[0]:
+        t_x, dt_x = jax.vmap(lambda w, dw: jax.jvp(lambda z: sphere_exp(u, z), (w,), (dw,)))(*chart)
+        tangents, rates = jnp.concatenate([tangents, t_x]), jnp.concatenate([rates, dt_x])
     a = spatial_jumps(u, s, tangents, rates, twist_moment, F, n_a, length, EI, template)
     end = [c[0] for c in jump_corrections(jnp.ones(1), s, a)]
     data = data - jnp.stack([jnp.zeros(3), jnp.zeros(3), jnp.zeros(3), end[0], end[1], end[2]])
@@ -171,7 +176,8 @@ def _interpolant(ends, n_a, F, s, tangents, rates, length, EI, twist, template=F
 
 
 def spatial_contact_segment(ends, n_a, length, EI, frame, slots, owns_start, owns_end, setup: ContactSetup,
-                            displacement, axis, quad, twist=None, smooth=(0.0, 0.0), active=1.0):
+                            displacement, axis, quad, twist=None, smooth=(0.0, 0.0), active=1.0, pinned=0.0,
+                            extra=None):
     """One spatial segment with its obstacle slots.
 
     ends : (r_a, t_a, m_a, r_b, t_b, m_b) [3] each: positions µm, tangents, moments pN·µm
@@ -181,19 +187,27 @@ def spatial_contact_segment(ends, n_a, length, EI, frame, slots, owns_start, own
     slots : [C, 10] (σ, F pN, t, t' 1/µm); owns_start, owns_end, smooth, active: as for
         :func:`socbjax._contact_segment.planar_contact_segment`;
     twist : None (torsion-free rod) or (ψ_a, ψ_b, e_a, e_b, GJ, κ₀) of a twisting segment
-        without natural curvature (κ₁ = κ₂ = 0; τ₀ allowed).
+        without natural curvature (κ₁ = κ₂ = 0; τ₀ allowed);
+    extra : [M, 10] more interior point forces (σ, F pN, w, w′ 1/µm: filament–filament
+        contacts, :mod:`socbjax._contact_pairs`, their point's chart coordinate and its
+        arc-length derivative in this segment's log chart; zero force where unused), or None.
     Returns (segment rows [7] or [9] as :func:`socbjax._segment.spatial_segment_residual`,
     slot rows [C, 10], end force n_b [3] pN, the force lumped onto the start node [3] pN
-    (zero unless ``setup.lumped``), contact points [C, 3] µm, gaps [C] µm).
+    (zero unless ``setup.lumped``), contact points [C, 3] µm, gaps [C] µm, and at the
+    ``extra`` forces' σ (points, unit tangents, w, dw/dσ: [M, 3] each)).
     """
     r_a, _, m_a, r_b, _, m_b = ends
-    sigma, F, tangents, rates = slots[:, 0], slots[:, 1:4], slots[:, 4:7], slots[:, 7:10]
+    C = slots.shape[0]
+    extra = jnp.zeros((0, SPATIAL_SLOT_WIDTH)) if extra is None else extra
+    every = jnp.concatenate([slots, extra])
+    sigma, F = every[:, 0], every[:, 1:4]
+    tangents, rates = slots[:, 4:7], slots[:, 7:10]
     s = jnp.clip(sigma, 0.0, 1.0)
     F_node = F
     if setup.lumped:  # comparison only: the force goes to the two nodes, the segment never sees it
         F_node, F = F * s[:, None], jnp.zeros_like(F)
     u, w_a, w_b, coef, a, t_a, t_b, twist_moment = _interpolant(ends, n_a, F, s, tangents, rates, length, EI, twist,
-                                                                      setup.dense)
+                                                                      setup.dense, (extra[:, 4:7], extra[:, 7:10]))
     breaks = jnp.concatenate([jnp.zeros(1), jnp.sort(s), jnp.ones(1)])
     widths = jnp.diff(breaks)
     x = (breaks[:-1, None] + widths[:, None] * jnp.asarray(quad.points)[None, :]).ravel()
@@ -218,12 +232,14 @@ def spatial_contact_segment(ends, n_a, length, EI, frame, slots, owns_start, own
         rows.append(_twist_rows(u, t, dt, m, W, t_a, t_b, twist, balance, length, EI))
     w_k, dw_k = corrected_quintic(s, coef, s, a)
     t_k, dt_k = jax.vmap(lambda wk, dwk: jax.jvp(lambda z: sphere_exp(u, z), (wk,), (dwk,)))(w_k, dw_k)
-    shape = jnp.concatenate([tangents - t_k, length * rates - dt_k], axis=1)
-    slot_rows, gaps = contact_slot_rows((r_a, r_b, t_a, t_b), r_a + arms, s, sigma, slots[:, 1:4], tangents, rates,
-                                        shape, length, owns_start, owns_end, setup, displacement, axis, smooth,
-                                        active)
-    start_load = jnp.sum(slots[:, 1:4] - F_node, axis=0) if setup.lumped else jnp.zeros(3)
-    return jnp.concatenate(rows), slot_rows, n_a - jnp.sum(F_node, axis=0), start_load, r_a + arms, gaps
+    shape = jnp.concatenate([tangents - t_k[:C], length * rates - dt_k[:C]], axis=1)
+    points = r_a + arms
+    slot_rows, gaps = contact_slot_rows((r_a, r_b, t_a, t_b), points[:C], s[:C], sigma[:C], slots[:, 1:4], tangents,
+                                        rates, shape, length, owns_start, owns_end, setup, displacement, axis, smooth,
+                                        active, pinned)
+    start_load = jnp.sum(every[:, 1:4] - F_node, axis=0) if setup.lumped else jnp.zeros(3)
+    at_extra = (points[C:], t_k[C:], w_k[C:], dw_k[C:])
+    return jnp.concatenate(rows), slot_rows, n_a - jnp.sum(F_node, axis=0), start_load, points[:C], gaps, at_extra
 
 
 def _twist_rows(u, t, dt, m, W, t_a, t_b, twist, balance, length, EI):
@@ -241,29 +257,33 @@ def _twist_rows(u, t, dt, m, W, t_a, t_b, twist, balance, length, EI):
 
 
 def spatial_contact_segment_rows(positions, tangents, moments, m_start, forces, slots, network, setup: ContactSetup,
-                                 control, quad, frames, twist=None):
+                                 control, quad, frames, twist=None, extra=None):
     """All spatial segments with their slots (vmapped): (segment rows [S, 7 or 9], slot rows
     [S, C, 10], end forces n_b [S, 3] pN, start-node loads [S, 3] pN, contact points [S, C, 3]
-    µm, gaps [S, C] µm).  ``twist``: per-segment (ψ_a, ψ_b, e_a, e_b, GJ, κ₀) or None."""
+    µm, gaps [S, C] µm, and at the ``extra`` forces [S, M, 10] (pair contacts): points,
+    tangents, w, dw/dσ).  ``twist``: per-segment (ψ_a, ψ_b, e_a, e_b, GJ, κ₀) or None."""
     a, b = network.segments[:, 0], network.segments[:, 1]
     ends = (positions[a], tangents[a], m_start, positions[b], tangents[b], moments[b])
     axis = jnp.asarray(network.probe_direction, positions.dtype)
+    extra = jnp.zeros((network.n_segments, 0, SPATIAL_SLOT_WIDTH)) if extra is None else extra
 
-    def one(end, n, length, EI, frame, slot, own_a, own_b, smooth_a, smooth_b, active, tw):
+    def one(end, n, length, EI, frame, slot, own_a, own_b, smooth_a, smooth_b, active, pinned, tw, more):
         return spatial_contact_segment(end, n, length, EI, frame, slot, own_a, own_b, setup, control.displacement,
-                                       axis, quad, tw, (smooth_a, smooth_b), active)
+                                       axis, quad, tw, (smooth_a, smooth_b), active, pinned, more)
 
     return jax.vmap(one)(ends, forces, network.lengths, network.EI, frames, slots, setup.owns_start, setup.owns_end,
-                         setup.slot_smooth_start, setup.slot_smooth_end, setup.active, twist)
+                         setup.slot_smooth_start, setup.slot_smooth_end, setup.active, setup.pinned, twist, extra)
 
 
 def initial_spatial_slots(network, setup: ContactSetup | None, tangents) -> jax.Array:
-    """Slot unknowns [S, C, 10] of a force-free straight state: the segment middle (σ = ½),
-    zero force, the start tangent and zero curvature."""
+    """Slot unknowns [S, C, 10] of a force-free straight state: the segment middle (σ = ½; a
+    pinned slot's free end, where its row rests), zero force, the start tangent and zero
+    curvature."""
     C = 0 if setup is None else setup.n_obstacles
     S = network.n_segments
     if C == 0:
         return jnp.zeros((S, 0, SPATIAL_SLOT_WIDTH))
     t = tangents[network.segments[:, 0]]
     one = jnp.concatenate([jnp.full((S, 1), 0.5), jnp.zeros((S, 3)), t, jnp.zeros((S, 3))], axis=1)
-    return jnp.broadcast_to(one[:, None, :], (S, C, SPATIAL_SLOT_WIDTH))
+    slots = jnp.broadcast_to(one[:, None, :], (S, C, SPATIAL_SLOT_WIDTH))
+    return slots.at[..., 0].set(rest_sigma(setup))

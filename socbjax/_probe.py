@@ -23,7 +23,7 @@ from ._result import PHASES, CompressionResult, LimitPoint
 from ._solution import RESULTS, result_name
 
 __all__ = ["probe_network", "probe_gap", "probe_frame", "applied_loads", "observe", "observe_rows", "compress_settings", "end_nodes",
-           "check_compress_inputs", "check_compress_options", "no_surfaces", "package_path", "parameters_json",
+           "check_compress_inputs", "check_compress_options", "crossing_exempt", "package_path", "parameters_json",
            "surface_crossing"]
 
 
@@ -103,8 +103,8 @@ def surface_crossing(network: Network, positions, displacement):
     the surface is the plane h = gap of the farthest opposing support (:func:`probe_gap`),
     the probe plane h = u (probe displacement of the row).  ``positions`` [K, N, d] (µm),
     ``displacement`` [K] (µm); numpy in, numpy out; JAX arrays (traced) in, JAX out.
-    Computed without contact (``contact=None``; every 3D network so far) a crossing is a
-    flagged status, never success."""
+    Computed without contact (``contact=None``) a crossing is a flagged status, never success
+    (with contact it is the contact law's business: :func:`crossing_exempt`)."""
     padded = network.padding is not None
     xp = jnp if padded or is_traced(positions, displacement) or isinstance(positions, jax.Array) else np
     origin, gap = probe_frame(network)
@@ -299,10 +299,13 @@ def observe_rows(model, X: np.ndarray, capacity: int, U: np.ndarray | None = Non
     return [np.asarray(a)[:K] for a in observe(model, jnp.asarray(padded), model.network.loads, jnp.asarray(u))]
 
 
-def no_surfaces(model, parameters) -> bool:
-    """Whether the path was computed with contact whose ``surfaces=False``: the user says there
-    are no probe face and substrate, so crossing their planes is no failure."""
-    return getattr(model, "contact", None) is not None and not (parameters or {}).get("contact", {}).get("surfaces", True)
+def crossing_exempt(model) -> bool:
+    """Whether the path was computed with contact, so that a node beyond the probe plane or the
+    substrate plane is no failure: with ``surfaces=False`` the user says there are no probe
+    face and substrate; with ``surfaces=True`` the contact law keeps every filament out of them
+    (they lie d/2 + δ beyond the anchored tips and bases, so an axis may come δ past those
+    planes; ``min_gap`` reports any penetration)."""
+    return getattr(model, "contact", None) is not None
 
 
 def package_path(model, rec, extra, result, settings, u_max, unload, parameters) -> CompressionResult:
@@ -320,7 +323,7 @@ def package_path(model, rec, extra, result, settings, u_max, unload, parameters)
               "n_nodes": int(net.n_nodes), "n_segments": int(net.n_segments), "n_junctions": int(net.n_junctions),
               "gap_um": probe_gap(net) if np.isfinite(probe_gap(net)) else None, **(parameters or {})}
     crossed = np.flatnonzero(surface_crossing(net, positions, np.asarray(rec["U"])))
-    if no_surfaces(model, parameters):
+    if crossing_exempt(model):
         crossed = crossed[:0]
     events = _limit_points(np.asarray(rec["U"]), probe_force, rec["SIGN"], rec["PHASE"])
     if crossed.size:

@@ -41,8 +41,9 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, Float
 
-from ._contact_pairs import PAIR_WIDTH, PairList, broad_phase, initial_pairs, merge_pairs, pair_extra, pair_rows, segment_table
+from ._contact_pairs import PairList, broad_phase, initial_pairs, merge_pairs, pair_extra, pair_rows, pair_width, segment_table
 from ._contact_segment import SLOT_WIDTH, ContactSetup, contact_segment_rows, initial_slots
+from ._contact_start import settle_locations
 from ._contact_spatial import SPATIAL_SLOT_WIDTH, initial_spatial_slots, spatial_contact_segment_rows
 from ._geometry import orthonormal_complement
 from ._junction import director_targets, moment_transfer, nodal_couple_transfer
@@ -96,7 +97,8 @@ class SOCBState(eqx.Module):
     twists: Array  # material-frame angles [N] (rad) of a twisting network, else [0]
     contacts: Array  # contact slots: 2D [S, C, 5] (σ, F pN, θ rad, κ 1/µm; socbjax._contact_segment),
     # 3D [S, C, 10] (σ, F pN, t, t' 1/µm; socbjax._contact_spatial); C = 0 without contact
-    pairs: Array  # filament–filament contact slots [P, 10] (socbjax._contact_pairs), P = 0 without
+    pairs: Array  # filament–filament contact slots [P, 10] (2D) or [P, 19] (3D) (socbjax._contact_pairs),
+    # P = 0 without
 
 
 def n_twists(network: Network) -> int:
@@ -190,9 +192,8 @@ def _contact_kernel(state, network, contact, control, quad, frames, m_start, ext
     if network.dim == 2:
         return contact_segment_rows(r, d, m, m_start, state.forces, state.contacts, network, contact, control, quad,
                                     extra)
-    out = spatial_contact_segment_rows(r, d, m, m_start, state.forces, state.contacts, network, contact, control, quad,
-                                       frames, _twist_data(state, network))
-    return (*out, None)
+    return spatial_contact_segment_rows(r, d, m, m_start, state.forces, state.contacts, network, contact, control, quad,
+                                        frames, _twist_data(state, network), extra)
 
 
 def _segment_rows(state, network, quad, frames, m_start):
@@ -281,7 +282,7 @@ def socb_structure(network: Network, n_obstacles: int = 0, n_pairs: int = 0):
     seg_rows, width = (4, 4) if d == 2 else (9 if network.twisting else 7, node_row_width(network))
     rows = np.concatenate([np.repeat(n_nodes + np.arange(n_seg), seg_rows), np.asarray(network.socb_rows) // width])
     slots = np.repeat(n_nodes + np.arange(n_seg), n_obstacles * slot_width(d))  # contact slots: at their segment
-    pairs = np.zeros(n_pairs * PAIR_WIDTH, int)  # pair slots join any two segments: dense solver only
+    pairs = np.zeros(n_pairs * pair_width(d), int)  # pair slots join any two segments: dense solver only
     unknown, rows = np.concatenate([unknown, slots, pairs]), np.concatenate([rows, slots, pairs])
     seg, attach = np.asarray(network.segments), np.asarray(network.attach)
     daughters = np.flatnonzero(attach != node_ids)
@@ -310,18 +311,37 @@ class SOCBModel(eqx.Module):
             directors, moments = jnp.arctan2(net.tangents[:, 1], net.tangents[:, 0]), jnp.zeros(net.n_nodes)
         else:
             directors, moments = net.tangents, jnp.zeros((net.n_nodes, 3))
-        return SOCBState(positions=net.positions, directors=directors, moments=moments,
-                         forces=jnp.zeros((net.n_segments, net.dim)), twists=jnp.zeros(n_twists(net)),
-                         contacts=(initial_slots(net, self.contact, directors) if net.dim == 2 else
-                                   initial_spatial_slots(net, self.contact, directors)),
-                         pairs=initial_pairs(self.n_pairs))
+        state = SOCBState(positions=net.positions, directors=directors, moments=moments,
+                          forces=jnp.zeros((net.n_segments, net.dim)), twists=jnp.zeros(n_twists(net)),
+                          contacts=(initial_slots(net, self.contact, directors) if net.dim == 2 else
+                                    initial_spatial_slots(net, self.contact, directors)),
+                          pairs=self._initial_pairs(net))
+        if self.contact is None:
+            return state
+        return settle_locations(self, state, Control.make(load_factor=0.0))
+
+    def _initial_pairs(self, net: Network):
+        """Empty pair slots holding the pairs of the reference state's broad phase (so that
+        the start is an equilibrium: the ids rows vanish)."""
+        empty = initial_pairs(self.n_pairs, net.dim)
+        if not self.n_pairs:
+            return empty
+        return empty.at[:, :2].set(self._broad_phase(net.positions)[0].astype(empty.dtype))
+
+    def _broad_phase(self, positions):
+        """(pair ids [P, 2], overflow) of the broad phase at ``positions`` (no derivatives)."""
+        net, c = self.network, self.contact
+        r = jax.lax.stop_gradient(positions)
+        a, b = net.segments[:, 0], net.segments[:, 1]
+        return broad_phase(0.5 * (r[a] + r[b]), 0.5 * net.lengths, 2.0 * c.filament_radius + c.reach, c.adjacent,
+                           c.capacity, 2 * c.per_segment)
 
     @property
     def n_unknowns(self) -> int:
         """Size of the flat state (host side, no tracing)."""
         net, w = self.network, (1 if self.network.dim == 2 else 3)
         return (net.n_nodes * (net.dim + 2 * w) + net.n_segments * (net.dim + self.n_obstacles * slot_width(net.dim))
-                + n_twists(net) + self.n_pairs * PAIR_WIDTH)
+                + n_twists(net) + self.n_pairs * pair_width(net.dim))
 
     @property
     def n_pairs(self) -> int:
@@ -352,10 +372,7 @@ class SOCBModel(eqx.Module):
         ids = jax.lax.stop_gradient(state.pairs[:, :2]).astype(jnp.int64)
         overflow = jnp.asarray(False)
         if rebuild:
-            r = jax.lax.stop_gradient(state.positions)
-            a, b = net.segments[:, 0], net.segments[:, 1]
-            found, overflow = broad_phase(0.5 * (r[a] + r[b]), 0.5 * net.lengths, 2.0 * c.filament_radius + c.reach,
-                                          c.adjacent, c.capacity, 2 * c.per_segment)
+            found, overflow = self._broad_phase(state.positions)
             ids = merge_pairs(ids, found, net.n_segments)
         table, crowded = segment_table(ids, net.n_segments, c.per_segment)
         return PairList(ids=ids, table=table, overflow=overflow | crowded)
@@ -366,7 +383,7 @@ class SOCBModel(eqx.Module):
     def contact_geometry(self, state: SOCBState, control: Control | None = None):
         """Contact slots of ``state``: (points [c, d] µm, gaps [c] µm, forces on the filament
         [c, d] pN, counted [c] bool, end forces [S, d] pN, nodal loads of lumped contact [N, d]
-        pN) over the c = S·C obstacle slots, then (2D) the P pair slots (their point on
+        pN) over the c = S·C obstacle slots, then the P pair slots (their point on
         segment i; force on i).
         A slot is not counted where it sits on the start node of a segment inside a filament
         (the segment ending there reports that point) or on a node anchored on the obstacle
@@ -377,7 +394,7 @@ class SOCBModel(eqx.Module):
 
     def _contact_parts(self, state: SOCBState, control: Control):
         """:meth:`contact_geometry`'s first five outputs, the pair slots' points on both sides
-        [P, 2, 2], and the nodal loads [N, 2] of lumped contact."""
+        [P, 2, d], and the nodal loads [N, d] of lumped contact."""
         net, c, dim = self.network, self.contact, self.network.dim
         m_start = _start_moments(state, net, control)[0]
         frame = self.pair_list(state, rebuild=False) if self.n_pairs else None
@@ -388,11 +405,12 @@ class SOCBModel(eqx.Module):
         counted = (c.active * jnp.where(s >= 1.0, c.owns_end, 1.0) * jnp.where(s <= 0.0, c.owns_start, 1.0)) > 0
         out = (points.reshape(-1, dim), gaps.reshape(-1), state.contacts[..., 1:1 + dim].reshape(-1, dim),
                counted.reshape(-1))
-        both = jnp.zeros((0, 2, 2))
+        both = jnp.zeros((0, 2, dim))
         if frame is not None:
             _, pair_gaps, both = pair_rows(state.pairs, frame, at_pairs, net, c, (state.positions, state.directors))
             out = (jnp.concatenate([out[0], both[:, 0]]), jnp.concatenate([out[1], pair_gaps]),
-                   jnp.concatenate([out[2], state.pairs[:, 4:6]]), jnp.concatenate([out[3], frame.ids[:, 0] >= 0]))
+                   jnp.concatenate([out[2], state.pairs[:, 4:4 + dim]]),
+                   jnp.concatenate([out[3], frame.ids[:, 0] >= 0]))
         return (*out, end_forces, both, _start_node_loads(start_loads, net))
 
     def step_admissible(self, old: SOCBState, new: SOCBState):

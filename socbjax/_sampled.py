@@ -35,7 +35,7 @@ from jax.flatten_util import ravel_pytree
 from jaxtyping import Array
 
 from ._adjoint import ImplicitAdjoint
-from ._probe import applied_loads, end_nodes, no_surfaces, observe, parameters_json, probe_gap, surface_crossing
+from ._probe import applied_loads, crossing_exempt, end_nodes, observe, parameters_json, probe_gap, surface_crossing
 from ._network import is_traced
 from ._protocol import UNLOAD_MARGIN, phase_problem, settled_displacement
 from ._residual import Control
@@ -202,7 +202,7 @@ def compress_at(model, displacement, at=None, *, unload=False, perturbation=None
     positions, tangents, moments, forces, probe_force, axial, twists = observed[:7]
     count, min_gap, contact_force, contact_points, contact_forces = observed[7:]
     crossed = jnp.any(surface_crossing(net, positions, U) & converged)
-    if no_surfaces(model, parameters):
+    if crossing_exempt(model):
         crossed = jnp.asarray(False)
     result = RESULTS.where((result == RESULTS.successful) & crossed, RESULTS.surface_crossed, result)
     M = at.shape[0]

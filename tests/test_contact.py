@@ -137,8 +137,6 @@ def test_contact_input_errors_name_the_argument():
         sj.Contact(capacity=0)
     with pytest.raises(ValueError, match="self_contact=False"):
         sj.Contact(lumped=True)
-    with pytest.raises(NotImplementedError, match="self_contact=False"):  # 3D: obstacles only so far
-        sj.solve(sj.cantilever(3), forces={-1: [0, -1.0, 0]}, contact=sj.Contact())
     curved = sj.cantilever(3, GJ=1.0, natural_curvature=[0.5, 0.0, 0.0])
     with pytest.raises(NotImplementedError, match="natural curvature"):
         sj.solve(curved, forces={-1: [0, -1.0, 0]}, contact=sj.Contact(self_contact=False))

@@ -1,8 +1,9 @@
 """3D contact (socbjax.Contact on spatial networks): an interior point force carried exactly in
 the log-chart quintic, against an independent 3D shooting solution across the force jump
-(socbjax.testing.rod_on_sphere); the planar problem in any plane equals the 2D solution; the
-twisting rod equals the torsion-free one (a point force carries no twist); derivatives against
-finite differences; and an outcrop pressed between the probe face and the substrate."""
+(socbjax.testing.rod_on_sphere), also between two crossing filaments; the planar problem in
+any plane equals the 2D solution; the twisting rod equals the torsion-free one (a point force
+carries no twist); derivatives against finite differences; and an outcrop pressed between
+the probe face and the substrate."""
 
 import numpy as np
 import pytest
@@ -85,6 +86,50 @@ def test_3d_contact_gradient_matches_finite_differences():
     fd = (float(tip_height(1.0 + h)) - float(tip_height(1.0 - h))) / (2 * h)
     assert abs(g) > 1e-3
     assert abs(g - fd) < 1e-6 * max(1.0, abs(fd))
+
+
+def _crossing(n=4, EI_rod=1e8):
+    """A cantilever along x (clamped at the origin, n segments, L = 1) above a much stiffer
+    clamped–free rod crossing it along ``LINE`` through ``CROSS``: (network, tip node)."""
+    xs = np.linspace(0.0, 1.0, n + 1)
+    positions = np.concatenate([np.stack([xs, 0 * xs, 0 * xs], 1), CROSS + (xs - 0.5)[:, None] * LINE])
+    tangents = np.concatenate([np.tile([1.0, 0.0, 0.0], (n + 1, 1)), np.tile(LINE, (n + 1, 1))])
+    segments = [[i, i + 1] for i in range(n)] + [[n + 1 + i, n + 2 + i] for i in range(n)]
+    fixed = [np.eye(3)] + [np.zeros((0, 3))] * n + [np.eye(3)] + [np.zeros((0, 3))] * n
+    clamped = np.zeros(2 * n + 2, bool)
+    clamped[[0, n + 1]] = True
+    net = sj.make_network(positions, tangents, segments, 1.0 / n, [1.0] * n + [EI_rod] * n, fixed_directions=fixed,
+                          clamped=clamped)
+    return net, n
+
+
+LINE = np.array([0.3, 0.0, 1.0]) / np.linalg.norm([0.3, 0.0, 1.0])  # the crossing rod's axis, oblique
+CROSS = np.array([0.6, -0.12 - D, 0.0])  # µm: a point of that axis, D below the cantilever's touch height
+
+
+@pytest.mark.slow
+def test_crossing_filaments_in_3d_match_a_rod_pressed_onto_a_line():
+    """3D filament–filament contact (pair slots in each segment's log chart) against an
+    independent shooting solution: a cantilever pressed by (0, −3, 1) pN onto an oblique,
+    10⁸ times stiffer rod is a rod pressed onto a rigid line (socbjax.testing.rod_on_sphere
+    with ``line``); the contact force is interior to segments of both filaments.
+    Slow: 1–3 min on 2 cores (the dense 3D model with pair slots compiles for long)."""
+    net, tip = _crossing()
+    contact = sj.Contact(diameter=D, surfaces=False, force_limit=0.1 / D**2)  # the law of EI = 1
+    sol = sj.solve(net, forces={tip: TIP}, contact=contact)
+    pairs = np.asarray(sol.state.pairs)
+    k = int(np.argmax(np.linalg.norm(pairs[:, 4:7], axis=1)))
+    i, j, s_i, s_j, F = int(pairs[k, 0]), int(pairs[k, 1]), pairs[k, 2], pairs[k, 3], pairs[k, 4:7]
+    assert i < tip <= j and 0.05 < s_i < 0.95 and 0.05 < s_j < 0.95  # inside a segment of each filament
+    m0 = np.asarray(sol.moments)[0]
+    ref = rod_on_sphere(TIP, CROSS, D / 2, D, contact.law(1.0), [m0[1], m0[2], (i + s_i) / tip, *F], line=LINE)
+    assert abs(F[2]) > 0.3 and abs(F @ LINE) < 1e-6 * np.linalg.norm(F)  # out of the load plane, normal to the rod
+    assert np.abs(np.asarray(sol.positions[tip]) - ref["tip"]).max() < 1e-6
+    assert abs((i + s_i) / tip - ref["contact_s"]) < 1e-6
+    np.testing.assert_allclose(F, ref["force"], atol=1e-5)
+    # each filament's clamp balances what acts on it: the load and +F, or −F
+    np.testing.assert_allclose(np.asarray(sol.reactions[0]) + TIP + F, 0.0, atol=1e-8)
+    np.testing.assert_allclose(np.asarray(sol.reactions[tip + 1]) - F, 0.0, atol=1e-8)
 
 
 @pytest.mark.slow

@@ -68,17 +68,20 @@ def elastica_end_shortening(k: float, length: float = 1.0) -> float:
     return 2 * length * (1 - ellipe(k * k) / ellipk(k * k))
 
 
-def rod_on_sphere(tip_load, center, radius, diameter, law, guess, *, length=1.0, EI=1.0) -> dict:
+def rod_on_sphere(tip_load, center, radius, diameter, law, guess, *, length=1.0, EI=1.0, line=None) -> dict:
     """A 3D torsion-free cantilever clamped at the origin along x, loaded by ``tip_load``
     (pN, [3]) and pressed onto a rigid sphere (``center`` µm [3], ``radius`` µm; 0: a point):
     the Kirchhoff rod r' = t, t' = m × t/EI, m' = −t × n integrated (DOP853, rtol 1e-13)
     from the clamp to the contact point s_c and on to the tip, the internal force n jumping
     by the contact force F = f(gap) ν at s_c (ν the sphere's outward normal through the axis
     point, s_c where (r − center)·t = 0, gap = |r − center| − radius − d/2, ``law`` = (δ µm,
-    k pN/µm) as in :func:`elastica_on_point_obstacle`).  ``guess``: (m_y, m_z at the clamp
-    pN·µm, s_c µm, F [3] pN).  Returns {"tip": r(L) [3], "tip_tangent": t(L) [3],
-    "contact_s": s_c, "force": F [3]}."""
+    k pN/µm) as in :func:`elastica_on_point_obstacle`).  ``line`` [3] (optional): the obstacle
+    is instead the rigid straight line through ``center`` along ``line`` (a crossing rod's
+    axis; distances and the normal ν measured perpendicular to it; ``radius``: the crossing
+    rod's radius).  ``guess``: (m_y, m_z at the clamp pN·µm, s_c µm, F [3] pN).  Returns
+    {"tip": r(L) [3], "tip_tangent": t(L) [3], "contact_s": s_c, "force": F [3]}."""
     tip_load, center = np.asarray(tip_load, float), np.asarray(center, float)
+    along = None if line is None else np.asarray(line, float) / np.linalg.norm(line)
     delta, k = law
     opts = dict(rtol=1e-13, atol=1e-14, method="DOP853")
 
@@ -95,6 +98,8 @@ def rod_on_sphere(tip_load, center, radius, diameter, law, guess, *, length=1.0,
     def equations(z):
         a, b = legs(z)
         offset = a[:3] - center
+        if along is not None:
+            offset = offset - (offset @ along) * along
         dist = np.linalg.norm(offset)
         gap = dist - radius - diameter / 2
         law_force = k * delta / 3 * max(1 - gap / delta, 0) ** 3 * offset / dist
