@@ -34,8 +34,8 @@ import numpy as np
 from ._contact import penalty_force
 from ._contact_segment import handover_weight, location_bias, near_weight
 
-__all__ = ["PAIR_WIDTH", "SPATIAL_PAIR_WIDTH", "pair_width", "PairList", "adjacent_segments", "broad_phase", "merge_pairs", "segment_table", "pair_extra",
-           "pair_rows", "initial_pairs"]
+__all__ = ["PAIR_WIDTH", "SPATIAL_PAIR_WIDTH", "pair_width", "PairList", "adjacent_segments", "broad_phase",
+           "merge_pairs", "segment_table", "pair_extra", "pair_rows", "initial_pairs"]
 
 PAIR_WIDTH = 10  # 2D: i, j (ids, as numbers), σ_i, σ_j, F_x, F_y, θ_i, κ_i, θ_j, κ_j
 # 3D: i, j, σ_i, σ_j, F (3), w_i, w'_i, w_j, w'_j (3 each): each side's chart coordinate and its
@@ -50,6 +50,8 @@ def pair_width(dim: int) -> int:
 
 def _side_width(dim: int) -> int:
     return 2 if dim == 2 else 6  # (θ, κ) or (w, w')
+
+
 _OFFSET, _BASE = 2**19, 2**20  # integer cell coordinates -> one int64 key
 
 

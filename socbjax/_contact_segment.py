@@ -317,7 +317,7 @@ def contact_slot_rows(ends, points, s, sigma, F, tangent, bend, shape, length, o
         projected = sigma - jnp.clip(sigma - slope - bias, 0.0, 1.0)
         closest = jnp.where(bend * length > 0, projected, sigma - nearer)
         convex = smoothstep(bend * length / _PINNED_BEND)  # d(∇φ·t)/dσ: the projection row's slope
-        closest = jnp.where(pinned > 0, convex * projected + (1.0 - convex) * (sigma - (2.0 - pinned)), closest)
+        closest = jnp.where(pinned > 0, convex * projected + (1.0 - convex) * (sigma - _free_end(pinned)), closest)
         # far from a plane the slot rests at the segment's middle (its force is 0 there
         # anyway): the closest-point rule, whose choice of branch may jump while a segment is
         # straight and parallel to the plane, takes over near it (:func:`near_weight`).  A
@@ -373,4 +373,9 @@ def initial_slots(network, setup: ContactSetup | None, angles) -> jax.Array:
 
 def rest_sigma(setup: ContactSetup):
     """[S, C] where each slot rests far from contact: ½, or a pinned slot's free end."""
-    return jnp.where(setup.pinned > 0, 2.0 - setup.pinned, 0.5)
+    return jnp.where(setup.pinned > 0, _free_end(setup.pinned), 0.5)
+
+
+def _free_end(pinned):
+    """σ of a pinned slot's free end (``pinned`` 1: start anchored, free end σ = 1; 2: σ = 0)."""
+    return 2.0 - pinned
