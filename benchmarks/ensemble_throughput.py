@@ -14,7 +14,7 @@ under 64 random imperfection patterns (lateral 1e-4 pN per strand, directions fr
 
 Why batching gains little or much is measured, not guessed: every SuperLU factorisation
 runs on the host inside a ``jax.pure_callback`` (one callback call factors every batched
-member); the factorisation itself (``socbjax._linear._factor_solve``, private) is wrapped
+member); the factorisation itself (``socbjax._linear.factor_solve``, internal) is wrapped
 here to count factorisations and their host seconds, and so are the compiled path loops
 (``socbjax._protocol._chunk`` of ``compress``, ``socbjax._ensemble._phase`` of
 ``compress_ensemble``, private), to time what runs inside them.  Sequential runs factor only
@@ -45,7 +45,7 @@ import socbjax as sj
 from socbjax import _ensemble, _linear, _protocol
 
 LU = {"calls": 0, "seconds": 0.0, "compiled_s": 0.0}
-_factor_solve = _linear._factor_solve
+_factor_solve = _linear.factor_solve
 
 
 def _counted_factor_solve(*args, **kwargs):  # one SuperLU factorisation (+ solve) on the host, counted
@@ -57,7 +57,7 @@ def _counted_factor_solve(*args, **kwargs):  # one SuperLU factorisation (+ solv
         LU["seconds"] += time.perf_counter() - t0
 
 
-_linear._factor_solve = _counted_factor_solve  # looked up by the host callback at call time
+_linear.factor_solve = _counted_factor_solve  # looked up by the host callback at call time
 
 
 def _in_compiled(fn):  # time spent in the compiled phases (the rest is host-side set-up and results)

@@ -39,7 +39,7 @@ __all__ = [
     # contact
     "Contact", "Plane", "Sphere",
     # solver parts
-    "DampedNewton", "ImplicitAdjoint", "DenseLU", "ColouredSparseLU", "Bordered", "linear_solver_for", "make_model", "MODELS",
+    "DampedNewton", "ImplicitAdjoint", "DenseLU", "ColouredSparseLU", "PairedSparseLU", "Bordered", "linear_solver_for", "make_model", "MODELS",
     "SOCBModel", "SOCBState", "JointedModel", "JointedState", "Control",
     "coupling_matrix", "quintic_coefficients", "gauss_legendre",
     # fitting and data

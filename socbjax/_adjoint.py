@@ -40,7 +40,7 @@ def _factor(solver, f, x):
     """The solver's state for J = df/dx at x (f: flat -> flat)."""
     _, lin = jax.linearize(f, x)
     if hasattr(solver, "factor"):
-        return solver.factor(lin, x.shape[0], x.dtype, {})
+        return solver.factor(lin, x.shape[0], x.dtype, {"point": x})
     return solver.init(lx.FunctionLinearOperator(lin, jax.ShapeDtypeStruct(x.shape, x.dtype)), {})
 
 

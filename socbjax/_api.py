@@ -38,6 +38,7 @@ from ._goodness import (  # noqa: E402
 from ._io import atomic_path, check_output_path, load, load_checkpoint, output_lock, save, save_checkpoint  # noqa: E402
 from ._jointed import JointedModel, JointedState  # noqa: E402
 from ._linear import Bordered, ColouredSparseLU, DenseLU  # noqa: E402
+from ._paired import PairedSparseLU  # noqa: E402
 from ._models import FIT_MODELS, ColumnModel, FitModel, OutcropModel, UnitMeshModel, make_fit_model  # noqa: E402
 from ._lawn import LawnModel  # noqa: E402
 from ._network import Network, Padding, Topology, make_network  # noqa: E402

@@ -41,7 +41,7 @@ import scipy.sparse.linalg as spla
 from jax import Array
 
 __all__ = ["SPARSE_THRESHOLD", "DenseLU", "ColouredSparseLU", "Bordered", "BlockDiagonal", "color_columns",
-           "sparsity_pattern", "solver_kind"]
+           "sparsity_pattern", "solver_kind", "factor_solve"]
 
 SPARSE_THRESHOLD = 1500  # "auto" picks the sparse solver above this many unknowns
 
@@ -101,6 +101,15 @@ class _SeededSolver(lx.AbstractLinearSolver):
 
     def factor(self, matvec, n: int, dtype, options):
         return self.from_products(jax.vmap(matvec)(self.seeds(n, dtype)), n)
+
+    def factor_bordered(self, matvec, n: int, dtype, options):
+        """(state for J, border column c) of a bordered operator ``matvec`` over [x; p]
+        [n + 1] (J = its [:n, :n] block, c = its [:n, n] column): one batched product of
+        the seeds and the unit vector of p."""
+        seeds = jnp.pad(self.seeds(n, dtype), ((0, 0), (0, 1)))
+        seeds = jnp.concatenate([seeds, jnp.zeros((1, n + 1), dtype).at[0, n].set(1.0)])
+        products = jax.vmap(matvec)(seeds)
+        return self.from_products(products[:-1, :n], n), products[-1, :n]
 
     def init(self, operator, options):
         n = _check_operator(operator)
@@ -217,7 +226,7 @@ def _perm_sign(p: np.ndarray) -> int:
     return 1 - 2 * ((n - cycles) % 2)
 
 
-def _factor_solve(vals, rhs, *, indices, indptr, n, transpose, permc_spec):
+def factor_solve(vals, rhs, *, indices, indptr, n, transpose, permc_spec):
     """One SuperLU factorisation of the CSC matrix ``vals`` [nnz], solving rhs [k, n]."""
     if not np.all(np.isfinite(vals)):
         return np.full(rhs.shape, np.nan), 0.0
@@ -249,7 +258,7 @@ def _splu_host(vals, rhs, active, **kw):
         if not active[where].any():
             continue
         block = rhs[where]
-        x, sign = _factor_solve(vals[index], block.reshape(-1, block.shape[-1]), **kw)
+        x, sign = factor_solve(vals[index], block.reshape(-1, block.shape[-1]), **kw)
         X[where], signs[where] = x.reshape(block.shape), sign
     return X, signs
 
@@ -346,13 +355,9 @@ class Bordered(lx.AbstractLinearSolver):
         """The state for the bordered operator ``matvec`` over [x; p] (m = n + 1)."""
         if "border" not in options:
             raise ValueError("Bordered needs options={'border': (a, b)}, the constraint row of the parametrisation")
-        n = m - 1
-        seeds = jnp.pad(self.inner.seeds(n, dtype), ((0, 0), (0, 1)))
-        seeds = jnp.concatenate([seeds, jnp.zeros((1, m), dtype).at[0, n].set(1.0)])
-        products = jax.vmap(matvec)(seeds)
-        inner_state = self.inner.from_products(products[:-1, :n], n)
+        inner_state, c = self.inner.factor_bordered(matvec, m - 1, dtype, options)
         a, b = options["border"]
-        return inner_state, products[-1, :n], a, b
+        return inner_state, c, a, b
 
     def compute(self, state, vector, options):
         inner_state, c, a, b = state

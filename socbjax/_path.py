@@ -230,6 +230,12 @@ class PathProblem(eqx.Module):
     def frames(self, x):
         return self.model.frames(self.unravel()(x))
 
+    def hold_pairs(self, y, frames):
+        """[x; p] with the pair slots' ids set to the step's list (Newton's first step would put
+        them there: their rows are x_id − list id); PairedSparseLU reads the list from x."""
+        hold = getattr(self.model, "hold_pairs", None)
+        return y if hold is None else jnp.concatenate([ravel_pytree(hold(self.unravel()(y[:-1]), frames))[0], y[-1:]])
+
     def admissible(self, x0, x1):
         """(whether the step x0 → x1 passes the model's own test, whether the model's capacity
         overflowed there): contact, no filament moved through an obstacle or another filament,
@@ -276,6 +282,7 @@ def _corrector_fn(y, args):
 def _correct(problem, guess, border, newton):
     """Newton on [F; g] from ``guess`` = [x̂; p̂]: (y, result, iterations, sign, tangent v)."""
     frames = problem.frames(guess[:-1])
+    guess = problem.hold_pairs(guess, frames)
     args = jax.lax.stop_gradient((problem, frames, border[0], border[1], guess))
     sol = root_find(_corrector_fn, jax.lax.stop_gradient(guess), args, solver=newton,
                     options={"linear": {"border": args[2:4]}}, adjoint=NonDifferentiable())

@@ -265,8 +265,9 @@ def socb_residual(state: SOCBState, network: Network, control: Control, frames: 
 def socb_structure(network: Network, n_obstacles: int = 0, n_pairs: int = 0):
     """Graph structure of the SOCB system, for sparse Jacobians (host side, numpy).
 
-    Vertices are the nodes (0..N−1) and segments (N..N+S−1); edges join a segment to its two
-    nodes and a daughter base to its mother node.  Returns (vertex of each unknown [n],
+    Vertices are the nodes (0..N−1), segments (N..N+S−1) and filament–filament pair slots
+    (N+S..N+S+P−1, no edges); edges join a segment to its two nodes and a daughter base to
+    its mother node.  Returns (vertex of each unknown [n],
     vertex of each residual row [n], edges [E, 2], number of vertices).  Every residual row
     at vertex v depends only on unknowns at vertices within graph distance 2 of v (segment
     rows: their nodes, and through the moment transfer the daughter bases at their start
@@ -282,7 +283,9 @@ def socb_structure(network: Network, n_obstacles: int = 0, n_pairs: int = 0):
     seg_rows, width = (4, 4) if d == 2 else (9 if network.twisting else 7, node_row_width(network))
     rows = np.concatenate([np.repeat(n_nodes + np.arange(n_seg), seg_rows), np.asarray(network.socb_rows) // width])
     slots = np.repeat(n_nodes + np.arange(n_seg), n_obstacles * slot_width(d))  # contact slots: at their segment
-    pairs = np.zeros(n_pairs * pair_width(d), int)  # pair slots join any two segments: dense solver only
+    # each pair slot is a vertex of its own, without edges: the segments it joins change from
+    # step to step (socbjax._paired adds those couplings per pair list)
+    pairs = np.repeat(n_nodes + n_seg + np.arange(n_pairs), pair_width(d))
     unknown, rows = np.concatenate([unknown, slots, pairs]), np.concatenate([rows, slots, pairs])
     seg, attach = np.asarray(network.segments), np.asarray(network.attach)
     daughters = np.flatnonzero(attach != node_ids)
@@ -291,7 +294,7 @@ def socb_structure(network: Network, n_obstacles: int = 0, n_pairs: int = 0):
         np.stack([seg[:, 1], n_nodes + np.arange(n_seg)], 1),
         np.stack([daughters, attach[daughters]], 1),
     ])
-    return unknown, rows, edges, n_nodes + n_seg
+    return unknown, rows, edges, n_nodes + n_seg + n_pairs
 
 
 class SOCBModel(eqx.Module):
@@ -364,6 +367,13 @@ class SOCBModel(eqx.Module):
         if not self.n_pairs:
             return bases
         return bases, self.pair_list(state)
+
+    def hold_pairs(self, state: SOCBState, frames) -> SOCBState:
+        """``state`` with its pair slots' ids set to those of ``frames`` (:meth:`frames`)."""
+        if not self.n_pairs:
+            return state
+        ids = frames[1].ids.astype(state.pairs.dtype)
+        return eqx.tree_at(lambda s: s.pairs, state, state.pairs.at[:, :2].set(ids))
 
     def pair_list(self, state: SOCBState, rebuild: bool = True) -> PairList:
         """The pairs of ``state``: its own ids (``rebuild=False``) or, merged with them, those

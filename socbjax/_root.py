@@ -140,7 +140,8 @@ class DampedNewton(optx.AbstractRootFinder):
         factors = accepted & (~converged | first)
         # Under vmap the cond below runs both branches for every member; "active" lets
         # host-side solvers (ColouredSparseLU) skip the factorisations that are discarded.
-        linear_options = {**options.get("linear", {}), "active": factors}
+        # "point": solvers whose pattern depends on the state (PairedSparseLU) read it there.
+        linear_options = {**options.get("linear", {}), "active": factors, "point": y}
 
         def factor(_):
             return self._direction(lin, f, y, linear_options, state.stats, tags)

@@ -196,7 +196,7 @@ def compress_at(model, displacement, at=None, *, unload=False, perturbation=None
     at = _targets(at, displacement)
     net = model.network
     loaded = eqx.tree_at(lambda m: m.network, model, net.replace(loads=applied_loads(net, perturbation)))
-    inner = linear_solver_for(loaded, settings.linear_solver)
+    inner = linear_solver_for(loaded, settings.linear_solver, batched=True)
     U, X, iterations, converged, stable, result, observed, u0 = _sampled(loaded, displacement, at, bool(unload),
                                                                         settings.traced(), inner)
     positions, tangents, moments, forces, probe_force, axial, twists = observed[:7]

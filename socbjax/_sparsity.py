@@ -26,13 +26,25 @@ import numpy as np
 import scipy.sparse as sp
 from jax.flatten_util import ravel_pytree
 
+from ._contact_pairs import PairList, pair_width
 from ._linear import ColouredSparseLU, DenseLU, solver_kind, sparsity_pattern
 from ._network import DIFFERENTIABLE_FIELDS, Padding
+from ._paired import PairGraph, PairedSparseLU
 from ._residual import Control, SOCBModel
 
-__all__ = ["structural_pattern", "prepare_sparse_solver", "linear_solver_for", "template_model"]
+__all__ = ["graph_reach", "structural_pattern", "prepare_sparse_solver", "linear_solver_for", "template_model"]
 
 _PREPARED: dict = {}
+
+
+def graph_reach(edges, n_vertices: int, radius: int = 2) -> sp.csr_matrix:
+    """[V, V] int32 sparse: 1 where two vertices are within ``radius`` edges of each other."""
+    A = sp.coo_matrix((np.ones(len(edges)), (edges[:, 0], edges[:, 1])), shape=(n_vertices, n_vertices))
+    A = ((A + A.T + sp.eye(n_vertices)) > 0).astype(np.int32).tocsr()
+    reach = A
+    for _ in range(radius - 1):
+        reach = ((reach @ A) > 0).astype(np.int32)
+    return reach
 
 
 def structural_pattern(structure, radius: int = 2) -> tuple[np.ndarray, np.ndarray]:
@@ -40,11 +52,7 @@ def structural_pattern(structure, radius: int = 2) -> tuple[np.ndarray, np.ndarr
     within ``radius`` of each other in the graph."""
     unknown_vertex, row_vertex, edges, n_vertices = structure
     n = unknown_vertex.size
-    A = sp.coo_matrix((np.ones(len(edges)), (edges[:, 0], edges[:, 1])), shape=(n_vertices, n_vertices))
-    A = ((A + A.T + sp.eye(n_vertices)) > 0).astype(np.int32).tocsr()
-    reach = A
-    for _ in range(radius - 1):
-        reach = ((reach @ A) > 0).astype(np.int32)
+    reach = graph_reach(edges, n_vertices, radius)
     R = sp.csr_matrix((np.ones(n, np.int32), (np.arange(n), row_vertex)), shape=(n, n_vertices))
     U = sp.csr_matrix((np.ones(n, np.int32), (unknown_vertex, np.arange(n))), shape=(n_vertices, n))
     pattern = (R @ reach @ U).tocsc()
@@ -83,6 +91,10 @@ def _residual_fn(template):
     state0 = template.initial_state()
     x0, unravel = ravel_pytree(state0)
     frames = template.frames(state0)
+    if getattr(template, "n_pairs", 0):  # the static part: an empty pair list (socbjax._paired)
+        bases, pairs = frames
+        frames = (bases, PairList(ids=-jnp.ones_like(pairs.ids), table=-jnp.ones_like(pairs.table),
+                                  overflow=pairs.overflow))
     return x0, lambda y, h: template.residual(unravel(y), Control.make(1.0, 0.3, h), frames)
 
 
@@ -109,11 +121,27 @@ def _refined(template, x0, fn) -> ColouredSparseLU:
     return ColouredSparseLU.from_pattern(rows[keep], cols[keep], n)
 
 
-def prepare_sparse_solver(model) -> ColouredSparseLU:
-    """The :class:`ColouredSparseLU` for ``model``'s Jacobian (cached per topology)."""
+def _paired(model, static: ColouredSparseLU) -> PairedSparseLU:
+    """The :class:`PairedSparseLU` of a model with pair slots, around its static part."""
+    net, P, W = model.network, model.n_pairs, pair_width(model.network.dim)
+    unknown_vertex, row_vertex, edges, _ = model.structure()
+    V, n0 = net.n_nodes + net.n_segments, static.n - P * W
+    graph = PairGraph((static.rows.a, static.cols.a), static.n, P, W, graph_reach(edges, V), row_vertex[:n0],
+                      unknown_vertex[:n0], net.n_nodes)
+    # a crowded segment: the columns near it, and the live unknowns of every pair at it and
+    # at its neighbours share its rows (2 per_segment pairs: a hash cell holds that many)
+    bound = static.n_colors + 4 * model.contact.per_segment * (W - 2)
+    chunk = 16
+    return PairedSparseLU(graph=graph, n=static.n, n_pairs=P, width=W, max_colors=-(-bound // chunk) * chunk,
+                          chunk=chunk)
+
+
+def prepare_sparse_solver(model) -> ColouredSparseLU | PairedSparseLU:
+    """The :class:`ColouredSparseLU` for ``model``'s Jacobian, or with filament–filament pair
+    slots the :class:`PairedSparseLU` around it (cached per topology)."""
     contact = getattr(model, "contact", None)
     key = (model.network.topology, model.network.padding is not None, type(model).__name__, getattr(model, "quad", None),
-           None if contact is None else (contact.kinds, contact.lumped))
+           None if contact is None else (contact.kinds, contact.lumped, contact.capacity, contact.per_segment))
     if key in _PREPARED:
         return _PREPARED[key]
     # Host-side set-up from random template values, also when called while the user's
@@ -123,6 +151,8 @@ def prepare_sparse_solver(model) -> ColouredSparseLU:
         x0, fn = _residual_fn(template)
         if isinstance(model, SOCBModel):
             solver = _refined(template, x0, fn)
+            if model.n_pairs:
+                solver = _paired(model, solver)
         else:
             rows, cols = sparsity_pattern(lambda y: fn(y, 0.5), x0)
             solver = ColouredSparseLU.from_pattern(rows, cols, x0.size)
@@ -130,9 +160,12 @@ def prepare_sparse_solver(model) -> ColouredSparseLU:
     return solver
 
 
-def linear_solver_for(model, kind: str = "auto"):
-    """:class:`DenseLU` or the prepared :class:`ColouredSparseLU` for ``model`` ("dense",
-    "sparse", or "auto": sparse above 1,500 unknowns).  Host side; works for traced values."""
-    if getattr(model, "n_pairs", 0):  # filament–filament pairs change the pattern from step to step
+def linear_solver_for(model, kind: str = "auto", *, batched: bool = False):
+    """:class:`DenseLU` or the prepared sparse solver for ``model`` ("dense", "sparse", or
+    "auto": sparse above 1,500 unknowns): :class:`ColouredSparseLU`, or with
+    filament–filament pair slots :class:`PairedSparseLU` (whose pattern follows the pairs;
+    ``batched``: for :class:`BlockDiagonal` re-solves, where pairs take dense LU).  Host
+    side; works for traced values."""
+    if batched and getattr(model, "n_pairs", 0):
         return DenseLU()
     return prepare_sparse_solver(model) if solver_kind(kind, model.n_unknowns) == "sparse" else DenseLU()
