@@ -57,7 +57,7 @@ def test_solves_match_a_dense_solve_of_the_exact_jacobian(pressed):
     assert int(np.sum(np.asarray(frames[1].ids)[:, 0] >= 0)) >= 1  # a pair is listed
     x, unravel = ravel_pytree(state)
     fn = lambda y: ravel_pytree(model.residual(unravel(y), sj.Control.make(), frames))[0]  # noqa: E731
-    J = np.asarray(jax.jacfwd(fn)(x))
+    J = np.asarray(jax.jit(jax.jacfwd(fn))(x))
     b = np.random.default_rng(0).standard_normal(x.size)
     op = lx.FunctionLinearOperator(jax.linearize(fn, x)[1], jax.ShapeDtypeStruct(x.shape, x.dtype))
     sol_state = solver.init(op, {"point": x})
