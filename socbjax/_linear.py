@@ -41,7 +41,7 @@ import scipy.sparse.linalg as spla
 from jax import Array
 
 __all__ = ["SPARSE_THRESHOLD", "DenseLU", "ColouredSparseLU", "Bordered", "BlockDiagonal", "color_columns",
-           "sparsity_pattern", "solver_kind", "factor_solve"]
+           "sparsity_pattern", "solver_kind", "factor_solve", "AbstractFullRankSolver"]
 
 SPARSE_THRESHOLD = 1500  # "auto" picks the sparse solver above this many unknowns
 
@@ -85,7 +85,24 @@ def _check_operator(operator: lx.AbstractLinearOperator) -> int:
     return structure.shape[0]
 
 
-class _SeededSolver(lx.AbstractLinearSolver):
+class AbstractFullRankSolver(lx.AbstractLinearSolver):
+    """lineax's queries for the socbjax solvers: real matrices (conj is the identity), square
+    and of full rank (a singular J is a failed solve, reported by the caller)."""
+
+    def conj(self, state, options):
+        return state, options
+
+    def assume_full_rank(self):
+        return True
+
+    def allow_dependent_columns(self, operator):
+        return False
+
+    def allow_dependent_rows(self, operator):
+        return False
+
+
+class _SeededSolver(AbstractFullRankSolver):
     """A solver that assembles J from products J·seedₖ (rows of :meth:`seeds`).
 
     ``factor(matvec, n, dtype, options)`` is ``init`` for a plain linear function (the
@@ -114,18 +131,6 @@ class _SeededSolver(lx.AbstractLinearSolver):
     def init(self, operator, options):
         n = _check_operator(operator)
         return self.factor(operator.mv, n, operator.in_structure().dtype, options)
-
-    def conj(self, state, options):
-        return state, options  # real matrices
-
-    def assume_full_rank(self):
-        return True
-
-    def allow_dependent_columns(self, operator):
-        return False
-
-    def allow_dependent_rows(self, operator):
-        return False
 
 
 # ----------------------------------------------------------------------------- dense
@@ -334,7 +339,7 @@ class ColouredSparseLU(_SeededSolver):
 
 
 # ------------------------------------------------------------------------- bordered
-class Bordered(lx.AbstractLinearSolver):
+class Bordered(AbstractFullRankSolver):
     """The bordered system of path following, [[J, c], [aᵀ, b]] over flat [x; p] [n + 1].
 
     ``inner`` (:class:`DenseLU` or :class:`ColouredSparseLU`) factors J; J and the border
@@ -370,18 +375,6 @@ class Bordered(lx.AbstractLinearSolver):
 
     def transpose(self, state, options):
         raise NotImplementedError("Bordered is a forward solver of path correctors; it is never transposed")
-
-    def conj(self, state, options):
-        return state, options
-
-    def assume_full_rank(self):
-        return True
-
-    def allow_dependent_columns(self, operator):
-        return False
-
-    def allow_dependent_rows(self, operator):
-        return False
 
 
 # -------------------------------------------------------------------- block diagonal

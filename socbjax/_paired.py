@@ -44,7 +44,7 @@ import lineax as lx
 import numpy as np
 import scipy.sparse as sp
 
-from ._linear import color_columns, factor_solve
+from ._linear import AbstractFullRankSolver, color_columns, factor_solve
 
 __all__ = ["PairGraph", "PairedSparseLU"]
 
@@ -146,7 +146,7 @@ class PairGraph:
         return X, signs
 
 
-class PairedSparseLU(lx.AbstractLinearSolver):
+class PairedSparseLU(AbstractFullRankSolver):
     """Sparse LU of an SOCB Jacobian with filament–filament pair slots (see the module doc).
 
     Made by :func:`socbjax._sparsity.prepare_sparse_solver` for a model with self-contact.
@@ -210,15 +210,3 @@ class PairedSparseLU(lx.AbstractLinearSolver):
     def transpose(self, state, options):
         products, ids, count, transpose = state
         return (products, ids, count, eqxi.Static(not transpose.value)), options
-
-    def conj(self, state, options):
-        return state, options
-
-    def assume_full_rank(self):
-        return True
-
-    def allow_dependent_columns(self, operator):
-        return False
-
-    def allow_dependent_rows(self, operator):
-        return False

@@ -81,3 +81,22 @@ def traces():
     jax.monitoring.register_event_duration_secs_listener(listener)
     yield names
     jax.monitoring.unregister_event_duration_listener(listener)
+
+
+def two_filaments():
+    """(network, tip node): a cantilever (4 segments, L 1 µm, EI 1 pN·µm²) 0.12 µm above a stiff
+    filament (7 segments, EI 1e6), both clamped at the left; the stiff one guided vertically at
+    its right end.  Filament–filament contact tests (test_contact, test_paired) press the tip
+    onto it."""
+    nA, nB = 5, 8
+    xa, xb = np.linspace(0, 1, nA), np.linspace(-0.1, 1.3, nB)
+    pos = np.concatenate([np.stack([xa, 0 * xa], 1), np.stack([xb, 0 * xb - 0.12], 1)])
+    seg = np.array([[i, i + 1] for i in range(nA - 1)] + [[nA + i, nA + i + 1] for i in range(nB - 1)])
+    lengths = np.linalg.norm(pos[seg[:, 1]] - pos[seg[:, 0]], axis=1)
+    EI_ = np.array([1.0] * (nA - 1) + [1e6] * (nB - 1))
+    fixed = ([np.eye(2)] + [np.zeros((0, 2))] * (nA - 1) + [np.eye(2)] + [np.zeros((0, 2))] * (nB - 2)
+             + [np.array([[0.0, 1.0]])])
+    clamped = np.zeros(nA + nB, bool)
+    clamped[[0, nA]] = True
+    return socbjax.make_network(pos, np.tile([1.0, 0.0], (nA + nB, 1)), seg, lengths, EI_, fixed_directions=fixed,
+                           clamped=clamped), nA - 1

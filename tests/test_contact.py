@@ -10,6 +10,7 @@ from scipy.special import ellipe, ellipk
 
 import jax
 import socbjax as sj
+from conftest import two_filaments
 from socbjax.testing import clamped_elastica_lobe_gap, elastica_end_shortening, elastica_on_point_obstacle
 
 L, EI, D = 1.0, 1.0, 0.01
@@ -162,27 +163,10 @@ def test_a_tip_pressed_onto_a_wall_rests_on_it_and_the_forces_balance():
     np.testing.assert_allclose(np.asarray(sol.reactions[0]) + load + slots[:, 1:3].sum(axis=0), 0.0, atol=1e-8)
 
 
-def _two_filaments():
-    """A cantilever (4 segments, EI 1) above a stiff filament (7 segments, EI 1e6) lying
-    0.12 µm below it, clamped at its left end and guided vertically at its right end."""
-    nA, nB = 5, 8
-    xa, xb = np.linspace(0, 1, nA), np.linspace(-0.1, 1.3, nB)
-    pos = np.concatenate([np.stack([xa, 0 * xa], 1), np.stack([xb, 0 * xb - 0.12], 1)])
-    seg = np.array([[i, i + 1] for i in range(nA - 1)] + [[nA + i, nA + i + 1] for i in range(nB - 1)])
-    lengths = np.linalg.norm(pos[seg[:, 1]] - pos[seg[:, 0]], axis=1)
-    EI_ = np.array([1.0] * (nA - 1) + [1e6] * (nB - 1))
-    fixed = ([np.eye(2)] + [np.zeros((0, 2))] * (nA - 1) + [np.eye(2)] + [np.zeros((0, 2))] * (nB - 2)
-             + [np.array([[0.0, 1.0]])])
-    clamped = np.zeros(nA + nB, bool)
-    clamped[[0, nA]] = True
-    return sj.make_network(pos, np.tile([1.0, 0.0], (nA + nB, 1)), seg, lengths, EI_, fixed_directions=fixed,
-                           clamped=clamped), nA - 1
-
-
 def test_filament_on_a_stiff_filament_matches_the_same_filament_on_a_wall():
     """Filament–filament contact (pair slots, broad phase) against the validated wall
     contact: a stiff filament under a cantilever acts as a plane d/2 above its axis."""
-    net, tip = _two_filaments()
+    net, tip = two_filaments()
     load = np.array([0.0, -3.0])
     pair = sj.solve(net, forces={tip: load}, contact=sj.Contact(diameter=D, surfaces=False, stiffness=1e6))
     wall = sj.Plane([0.0, -0.12 + D / 2], [0.0, 1.0])
@@ -219,7 +203,7 @@ def test_clamped_column_self_contact_follows_the_elastica_then_departs():
 
 
 def test_more_pairs_than_the_capacity_stop_the_path_and_say_so():
-    net, tip = _two_filaments()
+    net, tip = two_filaments()
     small = sj.Contact(diameter=D, surfaces=False, stiffness=1e6, capacity=1)
     sol = sj.solve(net, forces={tip: np.array([0.0, -3.0])}, contact=small, throw=False)
     assert sol.result == sj.RESULTS.contact_capacity

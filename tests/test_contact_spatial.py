@@ -41,6 +41,7 @@ def exact():
     return sol, ref
 
 
+@pytest.mark.slow  # about 75 s (the 3D shooting reference and two 3D contact models compile)
 def test_off_plane_contact_matches_3d_shooting(exact):
     sol, ref = exact
     j, slot = _loaded_slot(sol)

@@ -10,26 +10,10 @@ import jax
 import jax.numpy as jnp
 from jax.flatten_util import ravel_pytree
 import socbjax as sj
+from conftest import two_filaments
 
 L, EI, D = 1.0, 1.0, 0.01
 LOAD = np.array([0.0, -3.0])  # pN at the cantilever's tip: presses it onto the stiff filament
-
-
-def _two_filaments():
-    """A cantilever (4 segments, EI 1) 0.12 µm above a stiff filament (7 segments, EI 1e6),
-    both clamped at the left; the stiff one guided vertically at its right end."""
-    nA, nB = 5, 8
-    xa, xb = np.linspace(0, 1, nA), np.linspace(-0.1, 1.3, nB)
-    pos = np.concatenate([np.stack([xa, 0 * xa], 1), np.stack([xb, 0 * xb - 0.12], 1)])
-    seg = np.array([[i, i + 1] for i in range(nA - 1)] + [[nA + i, nA + i + 1] for i in range(nB - 1)])
-    lengths = np.linalg.norm(pos[seg[:, 1]] - pos[seg[:, 0]], axis=1)
-    EI_ = np.array([EI] * (nA - 1) + [1e6] * (nB - 1))
-    fixed = ([np.eye(2)] + [np.zeros((0, 2))] * (nA - 1) + [np.eye(2)] + [np.zeros((0, 2))] * (nB - 2)
-             + [np.array([[0.0, 1.0]])])
-    clamped = np.zeros(nA + nB, bool)
-    clamped[[0, nA]] = True
-    return sj.make_network(pos, np.tile([1.0, 0.0], (nA + nB, 1)), seg, lengths, EI_, fixed_directions=fixed,
-                           clamped=clamped), nA - 1
 
 
 CONTACT = sj.Contact(diameter=D, surfaces=False, stiffness=1e6)
@@ -37,7 +21,7 @@ CONTACT = sj.Contact(diameter=D, surfaces=False, stiffness=1e6)
 
 @pytest.fixture(scope="module")
 def pressed():
-    net, tip = _two_filaments()
+    net, tip = two_filaments()
     dense = sj.solve(net, forces={tip: LOAD}, contact=CONTACT, settings=sj.PathSettings(linear_solver="dense"))
     return net, tip, dense
 
@@ -59,7 +43,8 @@ def test_solves_match_a_dense_solve_of_the_exact_jacobian(pressed):
     fn = lambda y: ravel_pytree(model.residual(unravel(y), sj.Control.make(), frames))[0]  # noqa: E731
     J = np.asarray(jax.jit(jax.jacfwd(fn))(x))
     b = np.random.default_rng(0).standard_normal(x.size)
-    op = lx.FunctionLinearOperator(jax.linearize(fn, x)[1], jax.ShapeDtypeStruct(x.shape, x.dtype))
+    jvp = jax.jit(lambda v: jax.jvp(fn, (x,), (v,))[1])
+    op = lx.FunctionLinearOperator(jvp, jax.ShapeDtypeStruct(x.shape, x.dtype))
     sol_state = solver.init(op, {"point": x})
     got, result, _ = solver.compute(sol_state, jnp.asarray(b), {})
     assert result == lx.RESULTS.successful
