@@ -111,6 +111,8 @@ def _refined(template, x0, fn) -> ColouredSparseLU:
     keep = np.zeros(rows.size, bool)
     for z in points[:2]:
         keep |= np.asarray(values(z, half)) != 0
+    if getattr(template, "contact", None) is not None:
+        keep |= _contact_local(template, rows, cols)
     # check: the conservative pattern must carry the whole Jacobian (an exact jvp at a third point)
     v = rng.normal(size=n)
     exact = np.asarray(jax.jit(lambda z, t: jax.jvp(lambda y: fn(y, half), (z,), (t,))[1])(points[2], jnp.asarray(v)))
@@ -119,6 +121,19 @@ def _refined(template, x0, fn) -> ColouredSparseLU:
     if not np.allclose(approx, exact, rtol=1e-8, atol=1e-8 * max(1.0, float(np.abs(exact).max()))):
         raise RuntimeError("the graph sparsity pattern misses dependencies of the residual; use linear_solver='dense'")
     return ColouredSparseLU.from_pattern(rows[keep], cols[keep], n)
+
+
+def _contact_local(template, rows, cols) -> np.ndarray:
+    """[nnz] the entries of a segment's rows (kernel, contact slots) on the unknowns at it and
+    its nodes.  Contact switches (ownership hand-over, the location clip, the band) are flat
+    at random points, and an interior pair force adds such dependencies: where a refinement
+    by values dropped them, Newton's direction was wrong (a 3-generation outcrop with
+    self-contact took 149 Newton iterations against 107 with the dense LU)."""
+    unknown_vertex, row_vertex, edges, V = template.structure()
+    N, S = template.network.n_nodes, template.network.n_segments
+    adjacent = graph_reach(edges, V, radius=1).tocsr()
+    at_segment = (row_vertex[rows] >= N) & (row_vertex[rows] < N + S)
+    return at_segment & (np.asarray(adjacent[row_vertex[rows], unknown_vertex[cols]]).ravel() != 0)
 
 
 def _paired(model, static: ColouredSparseLU) -> PairedSparseLU:
