@@ -104,8 +104,9 @@ class Contact(eqx.Module):
     obstacles : rigid spheres / point obstacles (:class:`Sphere`).
     self_contact : contact between non-adjacent pieces of filament (any two segments that do
         not share a node: other filaments and the same one), found by a fixed-capacity
-        spatial-hash broad phase (:mod:`socbjax._contact_pairs`); uses the dense linear
-        solver (the pairs change the Jacobian's pattern).
+        spatial-hash broad phase (:mod:`socbjax._contact_pairs`).  The pairs change the
+        Jacobian's pattern from step to step: the sparse solver follows them
+        (:class:`socbjax.PairedSparseLU`, colours per pair list).
     capacity : pair slots (default max(8, S) for S segments); more candidates stop the path
         with ``RESULTS.contact_capacity``.
     per_segment : most pairs per segment (default 4; a hash cell holds up to twice as many
