@@ -9,8 +9,10 @@ including compilation, and the compiled time per Newton iteration), the contact 
 the compression, the smallest gap (the stated bound: −1 % of d), and the force curves: how
 much stiffer with contact and from which compression (first |ΔF| > 1 % of the peak).
 
-Filament–filament contact in 3D is built, but only with the dense solver (19 unknowns per pair
-slot), too slow for these outcrops: strands still pass through each other here.
+Filament–filament contact in 3D is built, also with the sparse solver (socbjax.PairedSparseLU),
+but not used here: with it the 4-generation outcrop stops at u = 1.403 of 1.5 µm (see
+docs/equations.md, "Sparse solver with pairs"), so strands still pass through each other in
+these runs.
 
 Writes ``contact_outcrop.json`` and ``contact_outcrop.png``.
 

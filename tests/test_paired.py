@@ -31,33 +31,55 @@ def _random_pairs(net, count, rng):
     return np.array(ids)
 
 
-def _dense_check(model, state, solver, rng):
-    """Solve J x = b with ``solver`` at ``state`` (its pair slots hold the list, used as it
-    is: no broad phase) and compare with numpy's solve of the exact Jacobian (jacfwd)."""
-    frames = (model.frames(state)[0], model.pair_list(state, rebuild=False))  # the list in the slots
+def _flat_residual(model, state, frames):
     x, unravel = ravel_pytree(state)
-    fn = lambda y: ravel_pytree(model.residual(unravel(y), sj.Control.make(0.3, 0.3, 0.5), frames))[0]  # noqa: E731
-    J = np.asarray(jax.jit(jax.jacfwd(fn))(x))
-    b = rng.standard_normal(x.size)
-    jvp = jax.jit(lambda v: jax.jvp(fn, (x,), (v,))[1])
-    op = lx.FunctionLinearOperator(jvp, jax.ShapeDtypeStruct(x.shape, x.dtype))
-    state = solver.init(op, {"point": x})
-    got, result, _ = solver.compute(state, jnp.asarray(b), {})
-    assert result == lx.RESULTS.successful
+    return x, lambda y: ravel_pytree(model.residual(unravel(y), sj.Control.make(0.3, 0.3, 0.5), frames))[0]
+
+
+@eqx.filter_jit
+def _jacobian(model, state, frames):
+    x, fn = _flat_residual(model, state, frames)
+    return jax.jacfwd(fn)(x)
+
+
+@eqx.filter_jit
+def _sparse_solves(model, solver, state, frames, b):
+    """(x with J x = b, y with Jᵀ y = b, both results) by ``solver``, J at ``state``."""
+    x, fn = _flat_residual(model, state, frames)
+    op = lx.FunctionLinearOperator(lambda v: jax.jvp(fn, (x,), (v,))[1], jax.ShapeDtypeStruct(x.shape, x.dtype))
+    factored = solver.init(op, {"point": x})
+    got, result, _ = solver.compute(factored, b, {})
+    got_t, result_t, _ = solver.compute(solver.transpose(factored, {})[0], b, {})  # the implicit adjoint's solve
+    return got, got_t, result, result_t
+
+
+def _dense_check(model, state, solver, rng):
+    """Solve J x = b and Jᵀ x = b with ``solver`` at ``state`` (its pair slots hold the list,
+    used as it is: no broad phase) against numpy's solves with the exact Jacobian (jacfwd)."""
+    frames = (model.frames(state)[0], model.pair_list(state, rebuild=False))
+    J = np.asarray(_jacobian(model, state, frames))
+    b = rng.standard_normal(J.shape[0])
     tol = 1e-8 * np.abs(b).max() * np.linalg.cond(J) ** 0.5
+    got, got_t, result, result_t = _sparse_solves(model, solver, state, frames, jnp.asarray(b))
+    assert result == lx.RESULTS.successful and result_t == lx.RESULTS.successful
     np.testing.assert_allclose(J @ np.asarray(got), b, rtol=0, atol=tol)
-    got_t, _, _ = solver.compute(solver.transpose(state, {})[0], jnp.asarray(b), {})  # the adjoint's solve
     np.testing.assert_allclose(J.T @ np.asarray(got_t), b, rtol=0, atol=tol)
 
 
-def test_the_jacobian_is_exact_at_generic_states_of_a_3d_outcrop_with_surfaces_and_pairs():
-    """A twisting 3D outcrop with the probe face and the substrate (obstacle slots on every
-    segment) at a perturbed state with a random pair list: an interior pair force makes its
-    segments' own rows depend on more unknowns than without (a missed dependency gave a
-    wrong Newton direction); the sparse solve must still be the exact one."""
+@pytest.fixture(scope="module")
+def outcrop():
+    """(network, model, its sparse solver): a 2-generation twisting 3D outcrop with the probe
+    face and the substrate (obstacle slots on every segment) and self-contact."""
     net = sj.dendritic_outcrop(generations=2, gap=3.0, seed=0)
     model = sj.make_model(net, contact=sj.Contact())
-    solver = sj.linear_solver_for(model, "sparse")
+    return net, model, sj.linear_solver_for(model, "sparse")
+
+
+def test_the_jacobian_is_exact_at_generic_states_of_a_3d_outcrop_with_surfaces_and_pairs(outcrop):
+    """Perturbed states with random pair lists: an interior pair force makes its segments'
+    own rows depend on more unknowns than without (a missed dependency gave a wrong Newton
+    direction); the sparse solve must still be the exact one."""
+    net, model, solver = outcrop
     assert isinstance(solver, sj.PairedSparseLU)
     rng = np.random.default_rng(0)
     x0, unravel = ravel_pytree(model.initial_state())
@@ -69,6 +91,14 @@ def test_the_jacobian_is_exact_at_generic_states_of_a_3d_outcrop_with_surfaces_a
         slots = np.asarray(state.pairs).copy()
         slots[:, :2], slots[:, 2:4] = ids, rng.uniform(0.2, 0.8, (model.n_pairs, 2))
         _dense_check(model, eqx.tree_at(lambda s: s.pairs, state, jnp.asarray(slots)), solver, rng)
+
+
+def test_the_jacobian_needs_the_state_that_holds_the_pair_list(outcrop):
+    _, model, solver = outcrop
+    x = ravel_pytree(model.initial_state())[0]
+    op = lx.FunctionLinearOperator(lambda v: v, jax.ShapeDtypeStruct(x.shape, x.dtype))
+    with pytest.raises(ValueError, match="point"):
+        solver.init(op, {})
 
 
 CONTACT = sj.Contact(diameter=D, surfaces=False, stiffness=1e6)
@@ -112,16 +142,6 @@ def test_solves_match_a_dense_solve_of_the_exact_jacobian(pressed):
     got_t, _, _ = solver.compute(t_state, jnp.asarray(b), {})
     ref_t = np.linalg.solve(J.T, b)
     np.testing.assert_allclose(np.asarray(got_t), ref_t, rtol=0, atol=1e-9 * np.abs(ref_t).max())
-
-
-def test_the_jacobian_needs_the_state_that_holds_the_pair_list():
-    net, _ = two_filaments()
-    model = sj.make_model(net, contact=CONTACT)
-    solver = sj.linear_solver_for(model, "sparse")
-    x = ravel_pytree(model.initial_state())[0]
-    op = lx.FunctionLinearOperator(lambda v: v, jax.ShapeDtypeStruct(x.shape, x.dtype))
-    with pytest.raises(ValueError, match="point"):
-        solver.init(op, {})
 
 
 @pytest.mark.slow
