@@ -75,6 +75,7 @@ def outcrop():
     return net, model, sj.linear_solver_for(model, "sparse")
 
 
+@pytest.mark.slow  # 67 s alone, 150 s in the 2-worker suite (compilation of a 3D contact model)
 def test_the_jacobian_is_exact_at_generic_states_of_a_3d_outcrop_with_surfaces_and_pairs(outcrop):
     """Perturbed states with random pair lists: an interior pair force makes its segments'
     own rows depend on more unknowns than without (a missed dependency gave a wrong Newton
@@ -93,6 +94,7 @@ def test_the_jacobian_is_exact_at_generic_states_of_a_3d_outcrop_with_surfaces_a
         _dense_check(model, eqx.tree_at(lambda s: s.pairs, state, jnp.asarray(slots)), solver, rng)
 
 
+@pytest.mark.slow  # the shared fixture prepares the solver (about 30 s)
 def test_the_jacobian_needs_the_state_that_holds_the_pair_list(outcrop):
     _, model, solver = outcrop
     x = ravel_pytree(model.initial_state())[0]
