@@ -45,8 +45,9 @@ from ._network import Network, Padding, Topology, make_network  # noqa: E402
 from ._padding import pad_outcrop, universal_strands  # noqa: E402
 from ._parameters import NUISANCE_PARAMETERS, Parameter  # noqa: E402
 from ._path import (  # noqa: E402
-    NaturalParameter, NoRecorder, PathProblem, PathSettings, PathState, PseudoArclength, StepRecorder, follow_path, start_path,
+    NaturalParameter, NoRecorder, PathProblem, PathState, PseudoArclength, StepRecorder, follow_path, start_path,
 )
+from ._path_settings import PathSettings  # noqa: E402
 from ._perturbation import strand_perturbation  # noqa: E402
 from ._probe import probe_network  # noqa: E402
 from ._protocol import Checkpoint  # noqa: E402

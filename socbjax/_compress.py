@@ -19,7 +19,7 @@ import equinox as eqx
 from ._contact import Contact
 from ._contact_model import contact_setup
 from ._network import Network, is_traced
-from ._path import PathSettings
+from ._path_settings import PathSettings
 from ._probe import (
     applied_loads,
     check_compress_inputs,

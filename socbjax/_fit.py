@@ -29,7 +29,7 @@ from ._io import finite_json
 from ._fit_problem import BRANCHES, check_start, fit_problem, scaled_start
 from ._goodness import judge_fit
 from ._least_squares import gauss_newton_uncertainties, levenberg_marquardt, optax_minimise
-from ._path import PathSettings
+from ._path_settings import PathSettings
 from ._progress import plural
 from ._solution import RESULTS, ConvergenceError, result_name
 

@@ -29,7 +29,7 @@ from ._fit_model import FitModel, contact_shift, data_terms
 from ._goodness import estimate_noise
 from ._models import make_fit_model
 from ._parameters import NUISANCE_PARAMETERS, Parameter
-from ._path import PathSettings
+from ._path_settings import PathSettings
 from ._solution import RESULTS, ConvergenceError
 
 __all__ = ["FitProblem", "fit_problem", "BRANCHES", "FitRangeError", "PYTHON_FIXES", "stiffness_sources", "check_start",

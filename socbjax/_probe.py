@@ -16,7 +16,7 @@ from jax.flatten_util import ravel_pytree
 
 from ._checks import check_bool, check_choice, check_real, describe
 from ._network import Network, add_direction, is_traced
-from ._path import PROBE_PATH, PathSettings
+from ._path_settings import PROBE_PATH, PathSettings
 from ._perturbation import default_perturbation, perturbation_pattern, perturbation_plan, strand_segments
 from ._residual import Control, routed_nodal_force, state_tangents
 from ._result import PHASES, CompressionResult, LimitPoint

@@ -28,7 +28,8 @@ import jax.numpy as jnp
 import numpy as np
 from jax.flatten_util import ravel_pytree
 
-from ._path import PathProblem, PathSettings, StepRecorder, follow_path, path_weights, start_path
+from ._path import PathProblem, StepRecorder, follow_path, path_weights, start_path
+from ._path_settings import PathSettings
 from ._probe import observe
 from ._progress import Progress
 from ._residual import Control

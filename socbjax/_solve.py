@@ -28,16 +28,8 @@ from ._contact_model import contact_setup
 from ._equilibrium import Solution, node_angles_and_curvatures
 from ._jointed import JointedModel
 from ._network import Network, is_traced
-from ._path import (
-    LOAD_RAMP,
-    MAX_QUADRATURE_ORDER,
-    NoRecorder,
-    PathProblem,
-    PathSettings,
-    follow_path,
-    position_weights,
-    start_path,
-)
+from ._path import NoRecorder, PathProblem, follow_path, position_weights, start_path
+from ._path_settings import LOAD_RAMP, MAX_QUADRATURE_ORDER, PathSettings
 from ._quadrature import get_quadrature
 from ._residual import Control, SOCBModel, net_nodal_force
 from ._solution import RESULTS, ConvergenceError, result_message
