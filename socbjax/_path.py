@@ -20,7 +20,9 @@ p = 1; :class:`socbjax.DampedNewton` corrects it on the bordered system [F; g] =
 :class:`socbjax._linear.Bordered` solver: one factorisation of J per Newton step, which also
 yields sign(det J) and the next tangent).  A step is accepted only if Newton converged, the
 corrector moved the state by at most ``max_corrector_ratio`` of the predicted increment
-(in the ``check`` norm), the tangent turned by at most ``max_turn`` and det J ≠ 0; under
+(in the ``check`` norm), the tangent turned by at most ``max_turn`` and det J ≠ 0 (a step
+no longer than ``corner_step`` may pass a corner: a turn up to 1.25 rad, a corrector up to 3×
+the increment; see :func:`_accept`); under
 natural-parameter control also only if sign(det J) did not change (a critical point: the
 run stops with ``RESULTS.critical_point`` when the step shrinks below its minimum) and the
 path did not turn back in p (``RESULTS.fold``).  Rejected steps are halved; quick
@@ -133,6 +135,10 @@ def _newton(settings: PathSettings, inner) -> DampedNewton:
     return DampedNewton(atol=settings.atol, max_iterations=settings.max_iterations,
                         max_backtracks=settings.max_backtracks, linear_solver=Bordered(inner),
                         step_limit=_corrector_limit)
+
+
+_CORNER_TURN = 1.25  # rad: the largest turn a corner step may take (PathSettings.corner_step)
+_CORNER_RATIO = 3.0  # ≈ tan(_CORNER_TURN): the corrector of a step across such a corner
 
 
 def _norm(weights, v):
@@ -293,7 +299,16 @@ def _accept(c: PathState, problem, param, settings, y, guess, y1, converged, sig
     tau1 = jnp.where(jnp.all(jnp.isfinite(tau1)), tau1, secant)
     floor = settings.corrector_floor * (1.0 + _norm(check, jnp.concatenate([c.x, jnp.zeros(1, y.dtype)])))
     smooth = _norm(check, y1 - guess) <= settings.max_corrector_ratio * _norm(check, guess - y) + floor
-    turned = jnp.arccos(jnp.clip(jnp.sum(w * tau1 * c.tau), -1.0, 1.0)) <= settings.max_turn
+    turn = jnp.arccos(jnp.clip(jnp.sum(w * tau1 * c.tau), -1.0, 1.0))
+    turned = turn <= settings.max_turn
+    # A corner: the tangent turns by the same angle however small the step (a strand held by
+    # almost nothing meets a surface: the penalty's band is crossed over a stretch of path far
+    # shorter than min_step).  The corrector then moves ~tan(turn) × the increment, in
+    # proportion to the step, unlike a jump to another branch; tiny steps may pass it.
+    corner_step = 0.0 if settings.corner_step is None else settings.corner_step  # None (follow_path by hand): never
+    corner = ((c.ds <= corner_step) & (turn <= _CORNER_TURN)
+              & (_norm(check, y1 - guess) <= _CORNER_RATIO * _norm(check, guess - y) + floor))
+    smooth, turned = smooth | corner, turned | corner
     sign_flip = (sign != c.sign) & settings.detect_critical_points
     fold = tau1[-1] <= 0
     natural_ok = ~sign_flip & ~fold

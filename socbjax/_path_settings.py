@@ -25,6 +25,7 @@ _REAL_FIELDS = {
     "max_corrector_ratio": {"unit": "fraction", "low": 0.0},
     "max_turn": {"unit": "rad", "low": 0.0, "high": float(np.pi), "high_open": False},
     "corrector_floor": {"unit": "relative", "low": 0.0},
+    "corner_step": {"unit": "path parameter units", "low": 0.0, "low_open": False},
     "atol": {"unit": "dimensionless residual", "low": 0.0},
 }
 _COUNT_FIELDS = ("max_steps", "max_attempts", "fast_iterations", "max_iterations", "max_backtracks")
@@ -47,6 +48,11 @@ class PathSettings(eqx.Module):
         predicted increment (the path bends too sharply for the step): 0.5 | 0.5.
     max_turn : reject when the tangent turned by more than this (rad) in one step: π | 0.6.
     corrector_floor : absolute floor of that test, relative to 1 + ‖x‖: 1e-9 | 1e-12.
+    corner_step : a converged step no longer than this passes a corner of the path, where the
+        tangent turns by up to 1.25 rad however small the step (a contact that a floppy strand
+        reaches or leaves at nearly zero force: the penalty's band is crossed over a stretch of
+        the path far shorter than ``min_step``); the corrector may then move up to 3× the
+        predicted increment (tan 1.25 rad ≈ 3).  0 turns it off: 1e-4 | 1e-5.
     detect_critical_points : reject natural-parameter steps across which sign(det J)
         changes (the path crossed a critical point or jumped branch): True.
     atol : Newton tolerance on ‖F‖∞ (dimensionless): ``socbjax.default_atol`` | 1e-10.
@@ -57,7 +63,8 @@ class PathSettings(eqx.Module):
 
     Checked at construction (concrete values; traced fields, see :meth:`traced`, pass
     unchecked), so bad settings fail before anything is compiled, naming the field:
-    steps, ``max_corrector_ratio``, ``corrector_floor`` and ``atol`` finite and positive,
+    steps, ``max_corrector_ratio``, ``corrector_floor`` and ``atol`` finite and positive
+    (``corner_step`` ≥ 0),
     ``min_step <= initial_step <= max_step`` among those given; ``grow`` finite and ≥ 1;
     ``max_turn`` in (0, π]; the counts integers (not booleans, not floats) ≥ 1, at most
     2³¹ − 1 (int32 counters), ``max_steps`` at most 1,000,000 (it sizes the step buffers of
@@ -77,6 +84,7 @@ class PathSettings(eqx.Module):
     max_corrector_ratio: float | None = None
     max_turn: float | None = None
     corrector_floor: float | None = None
+    corner_step: float | None = None
     detect_critical_points: bool = eqx.field(static=True, default=True)
     atol: float | None = None
     max_iterations: int | None = None
@@ -134,7 +142,7 @@ class PathSettings(eqx.Module):
 
 LOAD_RAMP = dict(method="natural", initial_step=0.25, min_step=1e-6, max_step=1.0, max_steps=500, max_attempts=5000,
                  grow=2.0, fast_iterations=5, max_corrector_ratio=0.5, max_turn=float(np.pi), corrector_floor=1e-9,
-                 max_iterations=40, max_backtracks=16)
+                 corner_step=1e-4, max_iterations=40, max_backtracks=16)
 PROBE_PATH = dict(method="displacement", initial_step=0.02, min_step=1e-7, max_step=0.05, max_steps=1000,
                   max_attempts=5000, grow=1.5, fast_iterations=4, max_corrector_ratio=0.5, max_turn=0.6,
-                  corrector_floor=1e-12, atol=1e-10, max_iterations=25, max_backtracks=12)
+                  corrector_floor=1e-12, corner_step=1e-5, atol=1e-10, max_iterations=25, max_backtracks=12)

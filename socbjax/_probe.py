@@ -154,7 +154,8 @@ def compress_settings(settings, method, displacement) -> PathSettings:
     if not is_traced(displacement) and settings.max_step > 0.25 * float(displacement):
         cap = 0.25 * float(displacement)
         initial = min(settings.initial_step, cap)
-        settings = settings.replace(max_step=cap, initial_step=initial, min_step=min(settings.min_step, initial))
+        settings = settings.replace(max_step=cap, initial_step=initial, min_step=min(settings.min_step, initial),
+                                    corner_step=min(settings.corner_step, 1e-3 * cap))
     return settings
 
 

@@ -112,7 +112,7 @@ def _refined(template, x0, fn) -> ColouredSparseLU:
     for z in points[:2]:
         keep |= np.asarray(values(z, half)) != 0
     if getattr(template, "contact", None) is not None:
-        keep |= _contact_local(template, rows, cols)
+        keep |= _contact_local(template, rows, cols, keep)
     # check: the conservative pattern must carry the whole Jacobian (an exact jvp at a third point)
     v = rng.normal(size=n)
     exact = np.asarray(jax.jit(lambda z, t: jax.jvp(lambda y: fn(y, half), (z,), (t,))[1])(points[2], jnp.asarray(v)))
@@ -123,17 +123,25 @@ def _refined(template, x0, fn) -> ColouredSparseLU:
     return ColouredSparseLU.from_pattern(rows[keep], cols[keep], n)
 
 
-def _contact_local(template, rows, cols) -> np.ndarray:
+def _contact_local(template, rows, cols, found) -> np.ndarray:
     """[nnz] the entries of a segment's rows (kernel, contact slots) on the unknowns at it and
-    its nodes.  Contact switches (ownership hand-over, the location clip, the band) are flat
-    at random points, and an interior pair force adds such dependencies: where a refinement
-    by values dropped them, Newton's direction was wrong (a 3-generation outcrop with
-    self-contact took 149 Newton iterations against 107 with the dense LU)."""
+    its nodes, and on every unknown that any row of the same segment depends on (``found``:
+    the entries seen at the random points).  Contact switches (ownership hand-over, the
+    location clip, the band) are flat at random points, and an interior pair force adds such
+    dependencies: where a refinement by values dropped them, Newton's direction was wrong (a
+    3-generation outcrop with self-contact took 149 Newton iterations against 107 with the
+    dense LU).  A slot's rows see the segment's curve, so they depend on all that the
+    segment's kernel rows do — also the moments handed over at a branch node two graph steps
+    away (missing them stalled the 6-generation outcrop with surface contact at u = 1.03 µm)."""
     unknown_vertex, row_vertex, edges, V = template.structure()
     N, S = template.network.n_nodes, template.network.n_segments
     adjacent = graph_reach(edges, V, radius=1).tocsr()
     at_segment = (row_vertex[rows] >= N) & (row_vertex[rows] < N + S)
-    return at_segment & (np.asarray(adjacent[row_vertex[rows], unknown_vertex[cols]]).ravel() != 0)
+    near = np.asarray(adjacent[row_vertex[rows], unknown_vertex[cols]]).ravel() != 0
+    n = unknown_vertex.size
+    seen = sp.csr_matrix((np.ones(int(found.sum()), np.int32), (row_vertex[rows[found]], cols[found])), shape=(V, n))
+    curve = np.asarray(seen[row_vertex[rows], cols]).ravel() != 0
+    return at_segment & (near | curve)
 
 
 def _paired(model, static: ColouredSparseLU) -> PairedSparseLU:

@@ -143,3 +143,18 @@ def test_outcrop_between_probe_and_substrate_stays_out_of_both():
     assert np.nanmin(res.min_gap) > -0.01 * contact.diameter  # the stated penetration bound
     assert np.max(res.contact_count) >= 1
     assert np.max(res.displacement) == pytest.approx(1.5)
+
+
+@pytest.mark.slow  # about 5 min on 2 cores
+def test_a_larger_outcrop_passes_the_corners_where_free_strand_ends_meet_a_surface():
+    """The 6-generation outcrop (126 segments): free strand ends reach the substrate at almost
+    zero force, where the path turns by ~1 rad over a stretch shorter than any step (see
+    docs/equations.md, "Two more defects"); it stopped at u = 1.034 µm before corner steps."""
+    net = sj.dendritic_outcrop(generations=6, gap=6.0, seed=0)
+    contact = sj.Contact(self_contact=False)
+    res = sj.compress(net, 1.5, method="arclength", contact=contact,
+                      settings=sj.PathSettings(max_step=0.05, initial_step=0.02))
+    assert res.completed and bool(np.all(res.converged))
+    assert np.max(res.displacement) == pytest.approx(1.5)
+    assert np.nanmin(res.min_gap) > -0.01 * contact.diameter
+    assert np.max(res.contact_count) >= 1

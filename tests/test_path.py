@@ -61,6 +61,46 @@ def test_arclength_follows_both_folds():
     assert np.count_nonzero(sign[1:] != sign[:-1]) == 2  # det J changes sign at each fold
 
 
+class Corner(eqx.Module):
+    """x = tan(1) · w log(1 + e^{(p − ½)/w}), w = 1e-10: a path that turns by 1 rad over a
+    stretch far shorter than any step (a floppy strand reaching a stiff contact)."""
+
+    def initial_state(self):
+        return jnp.zeros(1)
+
+    def frames(self, state):
+        return None
+
+    def residual(self, state, control, frames):
+        w = 1e-10
+        return state - np.tan(1.0) * w * jnp.logaddexp(0.0, (control.load_factor - 0.5) / w)
+
+
+@pytest.mark.parametrize("method", ["displacement", "arclength"])
+def test_a_corner_of_the_path_is_passed_by_small_steps_only_when_allowed(method):
+    """A turn of 1 rad at p = ½ fails the turn and corrector tests at every step size; steps
+    within ``corner_step`` may pass it (and then land on the exact path), with corner_step=0
+    the run stops there."""
+    weights = jnp.asarray([1.0, 1.0])
+    problem = sj.PathProblem(Corner(), sj.Control.make(0.0), sj.Control.make(1.0), weights, weights)
+    results = {}
+    for corner_step in (1e-5, 0.0):
+        settings = sj.PathSettings(method=method, initial_step=0.05, max_step=0.1, min_step=1e-8, max_steps=400,
+                                   max_attempts=5000, grow=1.5, fast_iterations=4, max_corrector_ratio=0.5,
+                                   max_turn=0.6, corrector_floor=1e-12, corner_step=corner_step, atol=1e-12,
+                                   max_iterations=25, max_backtracks=12)
+        recorder = sj.StepRecorder(400)
+        state = sj.follow_path(problem, sj.start_path(Corner().initial_state(), 0.0, settings, recorder), settings,
+                               sj.DenseLU(), recorder)
+        rows = state.recorder.rows(int(state.steps))
+        results[corner_step] = (state, rows["X"][:, 0], rows["P"])
+    state, x, p = results[1e-5]
+    assert state.result == sj.RESULTS.successful and p[-1] == pytest.approx(1.0)
+    np.testing.assert_allclose(x, np.tan(1.0) * np.maximum(p - 0.5, 0.0), atol=1e-9)
+    stopped, _, p0 = results[0.0]
+    assert stopped.result == sj.RESULTS.step_too_small and 0.5 - 1e-6 < p0.max() < 0.5 + 1e-6
+
+
 # ------------------------------------------------------------------ the load ramp of solve
 def test_aggressive_first_step_is_cut_back_and_converges():
     """PL²/EI = 10 in one step: Newton from the straight state may fail; cut-back rescues it."""
@@ -99,3 +139,6 @@ def test_settings_are_checked():
         sj.PathSettings(method="newton")
     with pytest.raises(ValueError, match="max_steps"):
         sj.solve(sj.cantilever(3, dim=2), {-1: [0.0, 1.0]}, settings=sj.PathSettings(max_steps=0))
+    with pytest.raises(ValueError, match="corner_step"):
+        sj.PathSettings(corner_step=-1e-5)
+    assert sj.PathSettings(corner_step=0.0).corner_step == 0.0  # 0: corners are never passed
