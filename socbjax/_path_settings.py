@@ -52,7 +52,9 @@ class PathSettings(eqx.Module):
         tangent turns by up to 1.25 rad however small the step (a contact that a floppy strand
         reaches or leaves at nearly zero force: the penalty's band is crossed over a stretch of
         the path far shorter than ``min_step``); the corrector may then move up to 3× the
-        predicted increment (tan 1.25 rad ≈ 3).  0 turns it off: 1e-4 | 1e-5.
+        predicted increment (tan 1.25 rad ≈ 3).  0 turns it off: 0 | 1e-5 with
+        ``method="arclength"`` (at most 1e-3 × the largest step), 0 otherwise (at fixed
+        load or displacement a corner step may land on another branch).
     detect_critical_points : reject natural-parameter steps across which sign(det J)
         changes (the path crossed a critical point or jumped branch): True.
     atol : Newton tolerance on ‖F‖∞ (dimensionless): ``socbjax.default_atol`` | 1e-10.
@@ -142,7 +144,7 @@ class PathSettings(eqx.Module):
 
 LOAD_RAMP = dict(method="natural", initial_step=0.25, min_step=1e-6, max_step=1.0, max_steps=500, max_attempts=5000,
                  grow=2.0, fast_iterations=5, max_corrector_ratio=0.5, max_turn=float(np.pi), corrector_floor=1e-9,
-                 corner_step=1e-4, max_iterations=40, max_backtracks=16)
+                 corner_step=0.0, max_iterations=40, max_backtracks=16)
 PROBE_PATH = dict(method="displacement", initial_step=0.02, min_step=1e-7, max_step=0.05, max_steps=1000,
                   max_attempts=5000, grow=1.5, fast_iterations=4, max_corrector_ratio=0.5, max_turn=0.6,
                   corrector_floor=1e-12, corner_step=1e-5, atol=1e-10, max_iterations=25, max_backtracks=12)

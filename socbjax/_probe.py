@@ -148,6 +148,11 @@ def compress_settings(settings, method, displacement) -> PathSettings:
     if settings.initial_step is None and settings.max_step is not None and not is_traced(settings.max_step):
         # a max_step below the default first step: start at max_step (not an error about a value never given)
         settings = settings.replace(initial_step=min(float(PROBE_PATH["initial_step"]), float(settings.max_step)))
+    if settings.corner_step is None and settings.method != "arclength":
+        # corners only by default under arclength, whose corrector plane crosses the outgoing
+        # path; at fixed displacement a corner step may land on another branch (a near-perfect
+        # column's buckling is a corner at that scale: a fit's path then stopped with a fold)
+        settings = settings.replace(corner_step=0.0)
     settings = settings.filled(**PROBE_PATH)
     if settings.method not in ("displacement", "arclength"):
         raise ValueError(f"method must be 'displacement' or 'arclength', got {settings.method!r}")
