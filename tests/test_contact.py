@@ -163,6 +163,7 @@ def test_a_tip_pressed_onto_a_wall_rests_on_it_and_the_forces_balance():
     np.testing.assert_allclose(np.asarray(sol.reactions[0]) + load + slots[:, 1:3].sum(axis=0), 0.0, atol=1e-8)
 
 
+@pytest.mark.slow  # 38–44 s: the default suite ran 10 min 26 s with it (2026-12-06)
 def test_filament_on_a_stiff_filament_matches_the_same_filament_on_a_wall():
     """Filament–filament contact (pair slots, broad phase) against the validated wall
     contact: a stiff filament under a cantilever acts as a plane d/2 above its axis."""
