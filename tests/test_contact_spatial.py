@@ -146,7 +146,7 @@ def test_outcrop_between_probe_and_substrate_stays_out_of_both():
     assert np.max(res.displacement) == pytest.approx(1.5)
 
 
-@pytest.mark.slow  # about 5 min on 2 cores
+@pytest.mark.slow  # 7 min 40 s on 2 cores (2026-12-06)
 def test_a_larger_outcrop_passes_the_corners_where_free_strand_ends_meet_a_surface():
     """The 6-generation outcrop (126 segments): free strand ends reach the substrate at almost
     zero force, where the path turns by ~1 rad over a stretch shorter than any step (see
