@@ -298,7 +298,8 @@ def _accept(c: PathState, problem, param, settings, y, guess, y1, converged, sig
     tau1 = _unit_tangent(v, w, jnp.where(c.primed, secant, c.tau))
     tau1 = jnp.where(jnp.all(jnp.isfinite(tau1)), tau1, secant)
     floor = settings.corrector_floor * (1.0 + _norm(check, jnp.concatenate([c.x, jnp.zeros(1, y.dtype)])))
-    smooth = _norm(check, y1 - guess) <= settings.max_corrector_ratio * _norm(check, guess - y) + floor
+    corrector, increment = _norm(check, y1 - guess), _norm(check, guess - y)
+    smooth = corrector <= settings.max_corrector_ratio * increment + floor
     turn = jnp.arccos(jnp.clip(jnp.sum(w * tau1 * c.tau), -1.0, 1.0))
     turned = turn <= settings.max_turn
     # A corner: the tangent turns by the same angle however small the step (a strand held by
@@ -307,7 +308,7 @@ def _accept(c: PathState, problem, param, settings, y, guess, y1, converged, sig
     # proportion to the step, unlike a jump to another branch; tiny steps may pass it.
     corner_step = 0.0 if settings.corner_step is None else settings.corner_step  # None (follow_path by hand): never
     corner = ((c.ds <= corner_step) & (turn <= _CORNER_TURN)
-              & (_norm(check, y1 - guess) <= _CORNER_RATIO * _norm(check, guess - y) + floor))
+              & (corrector <= _CORNER_RATIO * increment + floor))
     smooth, turned = smooth | corner, turned | corner
     sign_flip = (sign != c.sign) & settings.detect_critical_points
     fold = tau1[-1] <= 0
