@@ -54,6 +54,14 @@ _HANDOVER = 0.02
 # projection where l d²φ/ds² exceeds this (an interior dip; the row's conditioning), and rests
 # on the free end below it: a dip it cannot see is shallower than l × this / 8.
 _PINNED_BEND = 0.005
+# Any other slot takes the projection as l d²φ/ds² rises over [0, _BEND_BLEND] (a dip it
+# misses is shallower than l × this / 8: 0.06 nm for l = 0.5 µm, under 1 % of actin's d), and
+# otherwise the nearer end, chosen smoothly over end distances within _END_BLEND × δ of each
+# other.  A sharp switch chatters where a straight strand end lies flat on a surface: its
+# free tip has d²φ/ds² = 0 to rounding and its two ends are equally far (the 8-generation
+# outcrop, u ≈ 2.5 µm, where the location row jumped by 3e-4 to 1 between Newton iterates).
+_BEND_BLEND = 0.001
+_END_BLEND = 0.05
 SLOT_WIDTH = 5  # unknowns per 2D slot: σ, F_x, F_y, θ, κ
 
 
@@ -287,7 +295,11 @@ def contact_slot_rows(ends, points, s, sigma, F, tangent, bend, shape, length, o
     free end (a node, shared with the neighbour by the usual hand-over), and where it is convex
     the projection's minimum.  The slot rests on the free end and takes the closest-point
     projection smoothly as l d²φ/ds² rises past ``_PINNED_BEND``: the rule never jumps between
-    the ends, and stays regular on a straight segment parallel to the surface."""
+    the ends, and stays regular on a straight segment parallel to the surface.  Any other slot
+    rests on the nearer end where l d²φ/ds² ≤ 0 and takes the projection as it rises past
+    ``_BEND_BLEND``; the nearer end is blended over end distances within ``_END_BLEND`` δ of
+    each other (a straight segment lying flat on a surface: its slot sits between the ends,
+    each of which is then at most that much deeper than the slot).  Every switch is C¹."""
     C = setup.n_obstacles
     if C == 0:
         return jnp.zeros((0, 1 + F.shape[-1] + shape.shape[-1])), jnp.zeros(0)
@@ -306,7 +318,8 @@ def contact_slot_rows(ends, points, s, sigma, F, tangent, bend, shape, length, o
     radial = jnp.maximum(phi + setup.radii, 1e-300)
     bend = jnp.sum(grad * bend, axis=-1) + jnp.where(sphere, (1.0 - slope**2) / radial, 0.0)
     end_phi, end_slope = _end_distances(setup, ends, displacement, axis)
-    nearer = jnp.where(end_phi[0] <= end_phi[1], 0.0, 1.0)
+    # σ of the nearer end (0 or 1), blended where the ends are almost equally far
+    nearer = smoothstep(0.5 + (end_phi[0] - end_phi[1]) / (2.0 * _END_BLEND * setup.activation))
     bias = location_bias(sigma, gaps, length)
     if setup.dense:  # pattern template: no projection, no ownership, force everywhere
         # σ itself (the row's own diagonal far from contact) and the gap (the bias and the
@@ -315,9 +328,11 @@ def contact_slot_rows(ends, points, s, sigma, F, tangent, bend, shape, length, o
         magnitude = setup.force_scale * gaps * (1.0 + gaps)  # O(1) rows: the pattern check compares sums
     else:
         projected = sigma - jnp.clip(sigma - slope - bias, 0.0, 1.0)
-        closest = jnp.where(bend * length > 0, projected, sigma - nearer)
-        convex = smoothstep(bend * length / _PINNED_BEND)  # d(∇φ·t)/dσ: the projection row's slope
-        closest = jnp.where(pinned > 0, convex * projected + (1.0 - convex) * (sigma - _free_end(pinned)), closest)
+        # d(∇φ·t)/dσ = l d²φ/ds², the projection row's slope: the projection where it is
+        # clearly positive (a minimum), an end where it is not, C¹ in between
+        convex = smoothstep(bend * length / jnp.where(pinned > 0, _PINNED_BEND, _BEND_BLEND))
+        end = jnp.where(pinned > 0, _free_end(pinned), nearer)
+        closest = convex * projected + (1.0 - convex) * (sigma - end)
         # far from a plane the slot rests at the segment's middle (its force is 0 there
         # anyway): the closest-point rule, whose choice of branch may jump while a segment is
         # straight and parallel to the plane, takes over near it (:func:`near_weight`).  A

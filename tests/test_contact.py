@@ -8,6 +8,7 @@ import pytest
 from scipy.optimize import brentq
 from scipy.special import ellipe, ellipk
 
+import equinox as eqx
 import jax
 import socbjax as sj
 from conftest import two_filaments
@@ -74,6 +75,30 @@ def test_contact_gradient_matches_finite_differences():
     fd = (float(tip_height(EI + h)) - float(tip_height(EI - h))) / (2 * h)
     assert abs(g) > 1e-3
     assert abs(g - fd) < 1e-6 * max(1.0, abs(fd))
+
+
+def test_the_newton_step_limit_stops_a_gap_at_its_stated_depth():
+    """SOCBModel.newton_step_limit (IPC's step filter for the penalty): a straight segment
+    moved rigidly toward a plane has the same gap at every point, linear along the step, so
+    the admitted fraction is analytic: a gap g₀ outside the band may enter it by δ/4, one
+    inside may at most double its depth 1 − g/δ (plus ¼), never below 1 % of the step."""
+    net = sj.cantilever(2, length=L, EI=EI, dim=2)
+    delta = D / 10
+
+    def limit(g0, move):
+        wall = sj.Plane([0.0, -(D / 2 + g0)], [0.0, 1.0])
+        model = sj.make_model(net, contact=sj.Contact(diameter=D, planes=(wall,), self_contact=False,
+                                                      surfaces=False))
+        old = model.initial_state()
+        new = eqx.tree_at(lambda s: s.positions, old, old.positions.at[:, 1].add(-move))
+        return float(model.newton_step_limit(old, new, sj.Control.make(), sj.Control.make()))
+
+    lower = lambda g0: min(2 * g0 - 1.25 * delta, 0.75 * delta)  # noqa: E731
+    for g0, move in ((3 * delta, 5 * delta), (0.5 * delta, 1.5 * delta), (0.9 * delta, 0.5 * delta)):
+        expected = min(1.0, (g0 - lower(g0)) / move)
+        assert abs(limit(g0, move) - expected) < 1e-12, (g0, move)
+    assert limit(3 * delta, -5 * delta) == 1.0  # moving away is never limited
+    assert limit(3 * delta, 1000 * delta) == 0.01  # the floor
 
 
 def test_contact_none_and_no_obstacles_keep_the_contact_free_model():
@@ -161,6 +186,31 @@ def test_a_tip_pressed_onto_a_wall_rests_on_it_and_the_forces_balance():
     slots = np.asarray(sol.state.contacts)[:, 0]
     assert slots[-1, 0] == 1.0 and slots[-1, 2] > 0.5  # at the tip (σ = 1), pushing up
     np.testing.assert_allclose(np.asarray(sol.reactions[0]) + load + slots[:, 1:3].sum(axis=0), 0.0, atol=1e-8)
+
+
+def test_the_contact_point_rule_is_continuous_where_a_straight_segment_lies_flat():
+    """A straight segment parallel to a plane inside its band: both ends are equally far and
+    d²φ/ds² = 0 (a strand end lying flat on the substrate, as on the 8-generation outcrop).
+    The slot rows must not jump when rounding tilts the segment or bends it by 1e-12 either
+    way: a jump made Newton chatter there (docs/equations.md, "flat-lying strand ends")."""
+    net = sj.cantilever(2, length=L, EI=EI, dim=2)
+    delta = D / 10
+    wall = sj.Plane([0.0, -(D / 2 + delta / 2)], [0.0, 1.0])
+    model = sj.make_model(net, contact=sj.Contact(diameter=D, planes=(wall,), self_contact=False, surfaces=False))
+    state = model.initial_state()
+    frames = model.frames(state)
+
+    def rows(tilt, kappa):
+        moved = eqx.tree_at(lambda s: (s.positions, s.contacts), state,
+                            (state.positions.at[-1, 1].add(tilt), state.contacts.at[0, 0, 4].set(kappa)))
+        return np.asarray(model.residual(moved, sj.Control.make(), frames))
+
+    for eps in (1e-9, 1e-12):
+        assert np.max(np.abs(rows(eps, 0.0) - rows(-eps, 0.0))) < 1e-4  # the tip a hair higher / lower
+        assert np.max(np.abs(rows(0.0, eps) - rows(0.0, -eps))) < 1e-4  # bent a hair away / toward
+    # away from the blends the rule is the nearer end: raising the tip by 2δ changes the rows
+    # by O(1) (the slot at σ = ½ is then half a segment from its root at the start)
+    assert np.max(np.abs(rows(2 * delta, 0.0) - rows(-2 * delta, 0.0))) > 0.5
 
 
 @pytest.mark.slow  # 38–44 s: the default suite ran 10 min 26 s with it (2026-12-06)
