@@ -279,16 +279,9 @@ def _predict(c: PathState, problem, param, settings):
     (at the start: the start itself, held at its p)."""
     tau = c.tau
     reach = jnp.where(tau[-1] > 0, (1.0 - c.p) / jnp.where(tau[-1] > 0, tau[-1], 1.0), jnp.inf)
+    landing = (reach <= c.ds) | ~c.primed
     h = jnp.where(c.primed, jnp.minimum(c.ds, reach), 0.0)
     y = jnp.concatenate([c.x, c.p[None]])
-    # The corrector's step filter on the predictor too (contact): the tangent sees a light
-    # contact as soft and a free tip about to touch as not there, so a full step can carry
-    # a gap deep into the stiff penalty, from where Newton backs out by only 1/3 of the depth
-    # per iteration (the cubic law); the step is shortened so that it enters the band by at
-    # most δ/4 (or doubles a depth).  1 without contact.
-    limit = problem.step_limit(y, y + h * tau)
-    h = h * limit
-    landing = ((reach <= c.ds) & (limit >= 1.0)) | ~c.primed
     guess = y + h * tau
     guess = guess.at[-1].set(jnp.where(landing & c.primed, 1.0, guess[-1]))
     natural = NaturalParameter().border(tau, problem.weights)
