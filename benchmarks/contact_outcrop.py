@@ -20,9 +20,9 @@ Run:  PYTHONPATH=. python benchmarks/contact_outcrop.py [--quick] [--out DIR]
 (default: 8 generations, 6 µm gap, 3 µm and back: the contact run reaches u = 2.656 µm in
 21 min on 2 cores and slows down where free tips arrive at a surface, so it has not been run
 to the end, see docs/equations.md, "Free tips arriving at a surface"; --quick: 6
-generations, 1.5 µm and back, 2026-12-06 on 2 cores: with contact completed, 268 steps, 903
-Newton iterations, 406 s first call; without, 41 s, stopping with surface_crossed from
-u = 1.062 µm).
+generations, 1.5 µm and back, 2026-12-07 on 2 cores: with contact completed, 268 steps, 905
+Newton iterations, 406–481 s first call; without, 37–41 s, stopping with surface_crossed
+from u = 1.062 µm).
 """
 
 from __future__ import annotations
