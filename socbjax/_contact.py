@@ -20,7 +20,10 @@ problem.  Penetration bound: f is decreasing, so a contact that carries the forc
 g = δ (1 − (3F/(kδ))^{1/3}); it penetrates by less than p·d exactly when
 F < (kδ/3)(1 + p d/δ)³.  The defaults (δ = d/10, k from :attr:`Contact.force_limit`) keep
 the penetration below 1 % of d up to that force; ``CompressionResult.min_gap`` reports the
-actual gap of every step.
+actual gap of every step.  The residual states the law as H(F·n) = H(f(g)) with one
+increasing map H (:func:`socbjax._contact_segment.force_law_rows`): the same solutions, but
+linear in the gap where the law is stiffer than the filament, so Newton comes out of a deep
+guess in a few steps instead of walking down the cube of the depth.
 """
 
 from __future__ import annotations

@@ -31,8 +31,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from ._contact import penalty_force
-from ._contact_segment import handover_weight, location_bias, near_weight
+from ._contact_segment import force_law_rows, handover_weight, location_bias, near_weight
 
 __all__ = ["PAIR_WIDTH", "SPATIAL_PAIR_WIDTH", "pair_width", "PairList", "adjacent_segments", "broad_phase",
            "merge_pairs", "segment_table", "pair_extra", "pair_rows", "initial_pairs"]
@@ -231,8 +230,7 @@ def pair_rows(pairs, frame: PairList, outputs, network, setup, nodes):
     one = jnp.ones_like(s)
     owned = jnp.prod(handover_weight(s, slopes, setup.seg_owns_start[seg], one, (setup.smooth_start[seg],
                                                                                   setup.smooth_end[seg])), axis=1)
-    magnitude = owned * penalty_force(gaps, setup.activation, setup.stiffness)
-    force = (F - magnitude[:, None] * u) / setup.force_scale
+    force = force_law_rows(F, u, gaps, owned, setup, jnp.mean(length, axis=1))
     rows = jnp.concatenate([location, force, shape.reshape(P, -1)], axis=1)
     idle = jnp.concatenate([sigma - 0.5, F / setup.force_scale, pairs[:, 4 + dim:]], axis=1)
     rows = jnp.where(valid[:, None], rows, idle)

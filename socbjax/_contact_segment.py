@@ -20,7 +20,8 @@ Each contact slot k (one per segment and obstacle) has five unknowns: σ_k = s_k
 contact force F_k on the filament (pN, 2 components), and θ_k, κ_k (the angle and curvature
 at s_k, on which the jumps depend), with five rows: σ_k at the closest point of the curve to
 the obstacle (projected onto [0, 1]), F_k = f(gap) ∇φ (the penalty law of
-:mod:`socbjax._contact` along the obstacle's unit normal at the contact point),
+:mod:`socbjax._contact` along the obstacle's unit normal at the contact point, stated
+through an increasing map: :func:`force_law_rows`),
 θ_k = θ(s_k) and κ_k = θ'(s_k).  With the force and the curve's data as unknowns every row
 is an explicit function of the state: no inner iteration.
 """
@@ -36,8 +37,8 @@ from ._contact import penalty_force
 from ._quadrature import coupling_matrix
 
 __all__ = ["ContactSetup", "SLOT_WIDTH", "planar_contact_segment", "segment_jumps", "contact_segment_rows", "initial_slots", "handover_weight",
-           "smoothstep", "location_bias", "near_weight", "contact_slot_rows", "signed_distance", "jump_corrections",
-           "corrected_quintic", "rest_sigma"]
+           "smoothstep", "end_blend", "location_bias", "near_weight", "contact_slot_rows", "signed_distance", "jump_corrections",
+           "corrected_quintic", "rest_sigma", "force_law_rows"]
 
 _MINV = np.linalg.inv(coupling_matrix(1.0))  # Hermite data (σ-units) -> monomial coefficients
 _POW = np.arange(6)
@@ -57,9 +58,10 @@ _PINNED_BEND = 0.005
 # Any other slot takes the projection as l d²φ/ds² rises over [0, _BEND_BLEND] (a dip it
 # misses is shallower than l × this / 8: 0.06 nm for l = 0.5 µm, under 1 % of actin's d), and
 # otherwise the nearer end, chosen smoothly over end distances within _END_BLEND × δ of each
-# other.  A sharp switch chatters where a straight strand end lies flat on a surface: its
-# free tip has d²φ/ds² = 0 to rounding and its two ends are equally far (the 8-generation
-# outcrop, u ≈ 2.5 µm, where the location row jumped by 3e-4 to 1 between Newton iterates).
+# other, widened by the ends' mean height above the surface (:func:`end_blend`).  A sharp
+# switch chatters where a straight strand end lies flat on a surface: its free tip has
+# d²φ/ds² = 0 to rounding and its two ends are equally far (the 8-generation outcrop,
+# u ≈ 2.5 µm, where the location row jumped by 3e-4 to 1 between Newton iterates).
 _BEND_BLEND = 0.001
 _END_BLEND = 0.05
 SLOT_WIDTH = 5  # unknowns per 2D slot: σ, F_x, F_y, θ, κ
@@ -248,6 +250,19 @@ def smoothstep(x):
     return x * x * (3.0 - 2.0 * x)
 
 
+def end_blend(end_phi, setup: ContactSetup):
+    """Width W [C] (µm) over which a slot's nearer-end rule blends between the ends, from their
+    distances ``end_phi`` [2, C] (µm): _END_BLEND δ, widened by the ends' mean gap ḡ where it
+    is positive, W = _END_BLEND δ + ḡ₊²/(ḡ₊ + _END_BLEND δ) (C¹).  While blended (|Δφ| < W)
+    the nearer end's gap is at least ḡ − W/2 ≥ min(ḡ, ḡ/2) − _END_BLEND δ/2: no end enters the
+    surface that the rule does not see, and an end lying flat *above* it (light contact, or
+    none) has a blend as wide as its height, so the rule does not flip between Newton iterates
+    when rounding or a step tilts it by a fraction of a nanometre."""
+    base = _END_BLEND * setup.activation
+    mean = jnp.maximum(0.5 * (end_phi[0] + end_phi[1]) - setup.filament_radius, 0.0)
+    return base + mean**2 / (mean + base)
+
+
 def location_bias(sigma, gaps, length):
     """The pull of a slot's location row toward the segment's middle: regular where the
     distance is flat along the segment, fading as (gap/l)² (0 in contact)."""
@@ -297,9 +312,10 @@ def contact_slot_rows(ends, points, s, sigma, F, tangent, bend, shape, length, o
     projection smoothly as l d²φ/ds² rises past ``_PINNED_BEND``: the rule never jumps between
     the ends, and stays regular on a straight segment parallel to the surface.  Any other slot
     rests on the nearer end where l d²φ/ds² ≤ 0 and takes the projection as it rises past
-    ``_BEND_BLEND``; the nearer end is blended over end distances within ``_END_BLEND`` δ of
-    each other (a straight segment lying flat on a surface: its slot sits between the ends,
-    each of which is then at most that much deeper than the slot).  Every switch is C¹."""
+    ``_BEND_BLEND``; the nearer end is blended over end distances within :func:`end_blend`
+    of each other (a straight segment lying flat on a surface: its slot sits between the
+    ends, each of which is then at most 0.09 × that width deeper than the slot).  Every
+    switch is C¹."""
     C = setup.n_obstacles
     if C == 0:
         return jnp.zeros((0, 1 + F.shape[-1] + shape.shape[-1])), jnp.zeros(0)
@@ -319,7 +335,7 @@ def contact_slot_rows(ends, points, s, sigma, F, tangent, bend, shape, length, o
     bend = jnp.sum(grad * bend, axis=-1) + jnp.where(sphere, (1.0 - slope**2) / radial, 0.0)
     end_phi, end_slope = _end_distances(setup, ends, displacement, axis)
     # σ of the nearer end (0 or 1), blended where the ends are almost equally far
-    nearer = smoothstep(0.5 + (end_phi[0] - end_phi[1]) / (2.0 * _END_BLEND * setup.activation))
+    nearer = smoothstep(0.5 + (end_phi[0] - end_phi[1]) / (2.0 * end_blend(end_phi, setup)))
     bias = location_bias(sigma, gaps, length)
     if setup.dense:  # pattern template: no projection, no ownership, force everywhere
         # σ itself (the row's own diagonal far from contact) and the gap (the bias and the
@@ -345,10 +361,41 @@ def contact_slot_rows(ends, points, s, sigma, F, tangent, bend, shape, length, o
         near = near * active
         location = near * closest + (1.0 - near) * (sigma - 0.5)
         owned = active * handover_weight(s, end_slope, owns_start, owns_end, smooth)
-        magnitude = owned * penalty_force(gaps, setup.activation, setup.stiffness)
-    force = (F - magnitude[:, None] * grad) / setup.force_scale
+    if setup.dense:  # the normal part mixes the force's components (see force_law_rows)
+        force = (F - 0.5 * jnp.sum(F * grad, axis=-1, keepdims=True) * grad - magnitude[:, None] * grad) / setup.force_scale
+    else:
+        force = force_law_rows(F, grad, gaps, owned, setup, length)
     rows = jnp.concatenate([location[:, None], force, shape], axis=1)
     return rows, gaps
+
+
+def force_law_rows(F, normal, gaps, owned, setup: ContactSetup, length):
+    """The force rows [..., d] (dimensionless) of contact points: the force F [..., d] (pN) on
+    the filament equals ω f(g) along the unit ``normal`` [..., d], f the penalty law of
+    :func:`socbjax._contact.penalty_force` at the gap g [...] (µm), ω = ``owned`` [...] the
+    hand-over weight; ``length`` [...] µm the segment's length.
+
+    Tangential part (F − (F·n)n)/F_s; normal part (H(F·n) − H(ω f(g)))/F_s with the same
+    increasing map H on both sides: H(F) = F up to F_c and F_c (3 (F/F_c)^{1/3} − 2) above
+    (C¹: value and slope 1 match at F_c).  Newton on F − f(g) comes out of a deep guess by
+    only a factor 2/3 per iteration (the cube of the depth) wherever the structure holding
+    the point is softer than the law's tangent k x² (x = 1 − g/δ); above F_c the row is
+    linear in the gap instead, and Newton lands on the law's graph in a step or two
+    (``docs/equations.md``, "The force row in the gap where the law is the stiffer side").
+    F_c = (kδ/3) x_c³ with k x_c² = F_s/l, a segment's bending stiffness scale EI/l³.  H is
+    strictly increasing, so the row vanishes exactly on the law's graph and its gradient
+    there is H′ > 0 times that of F − ω f(g): solutions, tangents, sign(det J) and implicit
+    derivatives are those of the plain law."""
+    delta, k, scale = setup.activation, setup.stiffness, setup.force_scale
+    F_n = jnp.sum(F * normal, axis=-1)
+    F_c = k * delta / 3.0 * (scale / (length * k)) ** 1.5
+
+    def H(force):
+        z = force / F_c
+        return F_c * jnp.where(z > 1.0, 3.0 * jnp.cbrt(jnp.maximum(z, 1.0)) - 2.0, z)
+
+    normal_row = (H(F_n) - H(owned * penalty_force(gaps, delta, k))) / scale
+    return (F - F_n[..., None] * normal) / scale + normal_row[..., None] * normal
 
 
 def contact_segment_rows(positions, angles, moments, m_start, forces, slots, network, setup: ContactSetup, control,
