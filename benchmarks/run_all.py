@@ -36,6 +36,7 @@ SCRIPTS = [
     "twist_outcrop",
     "contact_planar",
     "contact_outcrop",
+    "contact_cost",
     "peers/elastica_comparison",  # PyElastica columns only with the extra socbjax[peers]
 ]
 

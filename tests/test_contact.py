@@ -107,8 +107,8 @@ def test_newton_comes_out_of_a_deep_guess_in_a_few_steps():
     3 δ into the band with no contact force: plain Newton on the residual (no line search)
     must land on the law's graph in a few steps.  With the force row F − f(g) it needed 14
     and 17 (the cube of the depth falls by 2/3 per iteration); the row is now linear in the
-    gap where the law is stiffer than the structure (docs/equations.md, "Free tips arriving
-    at a surface").  The answer obeys the law and the beam's own balance."""
+    gap where the law is stiffer than the structure (docs/equations.md, "The force row in the
+    gap").  The answer obeys the law, and the beam carries the load and the push."""
     from jax.flatten_util import ravel_pytree
 
     net = sj.cantilever(3, length=L, EI=EI, dim=2)
@@ -143,9 +143,8 @@ def test_newton_comes_out_of_a_deep_guess_in_a_few_steps():
         assert 0.0 < 1.0 - gap / delta < 0.05  # lightly pressed, inside the band
         # (the slot sits at the tip up to the length rows' tolerance, 1e-10 l: 1e-7 pN of law here)
         np.testing.assert_allclose(force[1], k * delta_law / 3 * (1 - gap / delta_law) ** 3, rtol=1e-6)
-        # the clamp takes the load less the wall's push
-        reaction = np.asarray(sj.solve(net, forces={-1: load}, contact=contact(y_wall)).reactions[0])
-        np.testing.assert_allclose(reaction + load + force, 0.0, atol=1e-9)
+        # the clamp's segment carries the load and the wall's push (n = Σ of the forces beyond)
+        np.testing.assert_allclose(np.asarray(state.forces)[0] - force, load, atol=1e-9)
 
 
 def test_contact_none_and_no_obstacles_keep_the_contact_free_model():
@@ -272,21 +271,20 @@ def test_the_nearer_end_rule_of_a_straight_segment_misses_little_depth():
     net = sj.cantilever(2, length=L, EI=EI, dim=2)
     delta = D / 10
     tilts = np.linspace(-3 * delta, 3 * delta, 1201)
+    wall = sj.Plane([0.0, -D / 2], [0.0, 1.0])  # the segment's axis at y = 0 touches it
+    model = sj.make_model(net, contact=sj.Contact(diameter=D, planes=(wall,), self_contact=False, surfaces=False))
+    state = model.initial_state()
+    state = eqx.tree_at(lambda s: s.contacts, state, state.contacts.at[0, 0, 0].set(0.0))
+    frames = model.frames(state)
+    n_slot = state.contacts.size
+
+    @jax.jit
+    def location(height, tilt):  # the row at σ = 0 is −(the rule's σ)
+        lifted = state.positions.at[:, 1].add(height).at[-1, 1].add(tilt)
+        return -model.residual(eqx.tree_at(lambda s: s.positions, state, lifted), sj.Control.make(), frames)[-n_slot]
+
     for height in (-0.2 * delta, 0.0, 0.5 * delta, 3 * delta, 10 * delta):
-        wall = sj.Plane([0.0, -(D / 2 + height)], [0.0, 1.0])
-        model = sj.make_model(net, contact=sj.Contact(diameter=D, planes=(wall,), self_contact=False,
-                                                      surfaces=False))
-        state = model.initial_state()
-        state = eqx.tree_at(lambda s: s.contacts, state, state.contacts.at[0, 0, 0].set(0.0))
-        frames = model.frames(state)
-        n_slot = state.contacts.size
-
-        @jax.jit
-        def location(tilt):  # the row at σ = 0 is −(the rule's σ)  # noqa: B023
-            moved = eqx.tree_at(lambda s: s.positions, state, state.positions.at[-1, 1].add(tilt))  # noqa: B023
-            return -model.residual(moved, sj.Control.make(), frames)[-n_slot]  # noqa: B023
-
-        sigma = np.asarray(jax.vmap(location)(tilts))
+        sigma = np.asarray(jax.vmap(location, (None, 0))(height, tilts))
         assert np.all((sigma > -1e-12) & (sigma < 1 + 1e-12))
         assert np.max(np.abs(np.diff(sigma))) < 0.1, height
         near = height + np.minimum(tilts, 0.0)  # the nearer end's gap
@@ -294,7 +292,7 @@ def test_the_nearer_end_rule_of_a_straight_segment_misses_little_depth():
         mean = height + tilts / 2
         assert np.all(seen - near <= 0.005 * delta + 0.1 * np.maximum(mean, 0.0) + 1e-15), height
         if height >= delta / 2:  # lying flat above the surface: a tilt of ±δ/10 does not flip the rule
-            assert abs(float(location(0.1 * delta)) - float(location(-0.1 * delta))) < 0.5, height
+            assert abs(float(location(height, 0.1 * delta)) - float(location(height, -0.1 * delta))) < 0.5, height
         if height <= delta / 2:  # in the band, a clear tilt puts the slot on the end
             clear = np.abs(tilts) > 1.5 * delta
             assert np.all(seen[clear] - near[clear] < 1e-3 * delta), height

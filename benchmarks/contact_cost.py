@@ -1,0 +1,83 @@
+"""Where the time of a Newton iteration goes with contact (issue 15): the residual, the
+coloured sparse Jacobian and SuperLU, for a dendritic outcrop without contact and with the
+probe face and the substrate (``Contact(self_contact=False)``), at the same generic state
+(the straight reference state plus 1e-3 random noise, where J is regular).
+
+Each part is timed three times after compilation (median).  The Jacobian is one JVP per
+colour (socbjax.ColouredSparseLU.values); the LU is scipy.sparse.linalg.splu on its
+non-zeros with COLAMD, as the solver does, plus one solve.
+
+Writes ``contact_cost.json``.
+
+Run:  PYTHONPATH=. python benchmarks/contact_cost.py [--quick] [--out DIR]
+(default: 8 generations, 493 segments; --quick: 6 generations.  2026-12-07 on 2 cores, one
+of them busy, 8 generations: residual 1.6 / 10.1 ms, Jacobian 102 / 971 ms with 26 / 46
+colours, SuperLU 30 / 223 ms with 96,064 / 636,846 non-zeros, 7,659 / 17,519 unknowns,
+without / with contact.)
+"""
+
+from __future__ import annotations
+
+import time
+
+import _common  # noqa: F401  (sets OPENBLAS_NUM_THREADS before numpy loads)
+import jax
+import numpy as np
+import scipy.sparse as sp
+import scipy.sparse.linalg as spla
+from jax.flatten_util import ravel_pytree
+
+import socbjax as sj
+
+
+def _median_time(fn, repeats: int = 3) -> float:
+    times = []
+    for _ in range(repeats):
+        t0 = time.perf_counter()
+        fn()
+        times.append(time.perf_counter() - t0)
+    return float(np.median(times))
+
+
+def measure(net, contact) -> dict:
+    model = sj.make_model(net, contact=contact)
+    flat, unravel = ravel_pytree(model.initial_state())
+    x = flat + 1e-3 * jax.random.normal(jax.random.PRNGKey(0), flat.shape)
+    frames, control = model.frames(unravel(x)), sj.Control.make()
+
+    def fn(z):
+        return model.residual(unravel(z), control, frames)
+
+    lin = sj.linear_solver_for(model, "sparse")
+    residual, jacobian = jax.jit(fn), jax.jit(lambda z: lin.values(fn, z))
+    values = np.asarray(jax.block_until_ready(jacobian(x)))  # compiles
+    jax.block_until_ready(residual(x))
+    matrix = sp.csc_matrix((values, lin.rows.a, lin.indptr.a), shape=(lin.n, lin.n))
+
+    def factor():
+        spla.splu(matrix, permc_spec="COLAMD").solve(np.ones(lin.n))
+
+    return {"unknowns": lin.n, "nnz": lin.nnz, "colours": lin.n_colors,
+            "residual_ms": 1e3 * _median_time(lambda: jax.block_until_ready(residual(x))),
+            "jacobian_ms": 1e3 * _median_time(lambda: jax.block_until_ready(jacobian(x))),
+            "lu_ms": 1e3 * _median_time(factor)}
+
+
+def main(argv=None) -> int:
+    args = _common.parse_args(__doc__, argv)
+    generations = 6 if args.quick else 8
+    net = sj.dendritic_outcrop(generations=generations, gap=6.0, seed=0)
+    free, contact = measure(net, None), measure(net, sj.Contact(self_contact=False))
+    rows = [[name, f"{free[key]:.{digits}f}", f"{contact[key]:.{digits}f}", f"{contact[key] / free[key]:.1f}"]
+            for name, key, digits in (("unknowns", "unknowns", 0), ("Jacobian non-zeros", "nnz", 0),
+                                      ("colours (JVPs per Jacobian)", "colours", 0), ("residual (ms)", "residual_ms", 1),
+                                      ("coloured Jacobian (ms)", "jacobian_ms", 0), ("SuperLU + solve (ms)", "lu_ms", 0))]
+    _common.print_table(["per Newton iteration", "no contact", "probe face + substrate", "ratio"], rows,
+                        title=f"{generations}-generation outcrop ({net.n_segments} segments)")
+    _common.write_json(args.out, "contact_cost", args, {"generations": generations, "segments": net.n_segments,
+                                                         "free": free, "contact": contact})
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
