@@ -180,6 +180,20 @@ def time_solve(net, forces, model: str = "socb", repeats: int = 9):
     return first, times, sol
 
 
+def median_ms(f, repeats: int) -> float:
+    """Median wall time in ms of f() over ``repeats`` calls after a first (compiling) call;
+    JAX results are waited for (``jax.block_until_ready``)."""
+    import jax
+
+    jax.block_until_ready(f())
+    times = []
+    for _ in range(repeats):
+        t0 = time.perf_counter()
+        jax.block_until_ready(f())
+        times.append(time.perf_counter() - t0)
+    return 1e3 * float(np.median(times))
+
+
 class Timer:
     def __enter__(self):
         self.t0 = time.perf_counter()

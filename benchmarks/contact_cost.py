@@ -18,8 +18,6 @@ without / with contact.)
 
 from __future__ import annotations
 
-import time
-
 import _common  # noqa: F401  (sets OPENBLAS_NUM_THREADS before numpy loads)
 import jax
 import numpy as np
@@ -28,15 +26,6 @@ import scipy.sparse.linalg as spla
 from jax.flatten_util import ravel_pytree
 
 import socbjax as sj
-
-
-def _median_time(fn, repeats: int = 3) -> float:
-    times = []
-    for _ in range(repeats):
-        t0 = time.perf_counter()
-        fn()
-        times.append(time.perf_counter() - t0)
-    return float(np.median(times))
 
 
 def measure(net, contact) -> dict:
@@ -50,17 +39,11 @@ def measure(net, contact) -> dict:
 
     lin = sj.linear_solver_for(model, "sparse")
     residual, jacobian = jax.jit(fn), jax.jit(lambda z: lin.values(fn, z))
-    values = np.asarray(jax.block_until_ready(jacobian(x)))  # compiles
-    jax.block_until_ready(residual(x))
-    matrix = sp.csc_matrix((values, lin.rows.a, lin.indptr.a), shape=(lin.n, lin.n))
-
-    def factor():
-        spla.splu(matrix, permc_spec="COLAMD").solve(np.ones(lin.n))
-
+    matrix = sp.csc_matrix((np.asarray(jacobian(x)), lin.rows.a, lin.indptr.a), shape=(lin.n, lin.n))
     return {"unknowns": lin.n, "nnz": lin.nnz, "colours": lin.n_colors,
-            "residual_ms": 1e3 * _median_time(lambda: jax.block_until_ready(residual(x))),
-            "jacobian_ms": 1e3 * _median_time(lambda: jax.block_until_ready(jacobian(x))),
-            "lu_ms": 1e3 * _median_time(factor)}
+            "residual_ms": _common.median_ms(lambda: residual(x), 3),
+            "jacobian_ms": _common.median_ms(lambda: jacobian(x), 3),
+            "lu_ms": _common.median_ms(lambda: spla.splu(matrix, permc_spec="COLAMD").solve(np.ones(lin.n)), 3)}
 
 
 def main(argv=None) -> int:

@@ -70,19 +70,6 @@ def tree_function(m: int, b: int = BLOCK, seed: int = 0):
     return fn
 
 
-def median_time(f, repeats: int) -> float:
-    """Median wall time in ms of f() over ``repeats`` calls after a first (compiling) call."""
-    import jax
-
-    jax.block_until_ready(f())
-    times = []
-    for _ in range(repeats):
-        t0 = time.perf_counter()
-        jax.block_until_ready(f())
-        times.append(time.perf_counter() - t0)
-    return 1e3 * float(np.median(times))
-
-
 def jacobian_solve(solver, fn):
     """(x, rhs [n, k]) -> (J(x)^-1 rhs [n, k], sign det J): one ``factor`` of J = dfn/dx from
     its JVP and ``compute`` for every right-hand side (vmapped: one factorisation)."""
@@ -117,18 +104,18 @@ def time_case(n: int, repeats: int, dense: bool) -> dict:
     vals = np.asarray(assemble(x))
     A = sp.csc_matrix((vals, sparse.rows.a, sparse.indptr.a), shape=(n, n))
     b = np.asarray(rhs)
-    host = {spec: median_time(lambda spec=spec: spla.splu(A, permc_spec=spec).solve(b), repeats)
+    host = {spec: C.median_ms(lambda spec=spec: spla.splu(A, permc_spec=spec).solve(b), repeats)
             for spec in ("MMD_AT_PLUS_A", "COLAMD")}
     row_nnz = np.bincount(sparse.rows.a, minlength=n)
     rec = {"n": n, "nnz": sparse.nnz, "mean_row_nnz": float(row_nnz.mean()), "max_row_nnz": int(row_nnz.max()),
            "n_colors": sparse.n_colors, "permc_spec": sparse.permc_spec, "prepare_s": prepare_s,
-           "assembly_ms": median_time(lambda: assemble(x), repeats),
+           "assembly_ms": C.median_ms(lambda: assemble(x), repeats),
            "factor_solve_ms": host["MMD_AT_PLUS_A"], "factor_solve_colamd_ms": host["COLAMD"],
-           "sparse_total_ms": median_time(lambda: solve(x, rhs), repeats), "dense_ms": None, "max_rel_diff": None}
+           "sparse_total_ms": C.median_ms(lambda: solve(x, rhs), repeats), "dense_ms": None, "max_rel_diff": None}
     X, sign = solve(x, rhs)
     if dense:
         dsolve = jax.jit(jacobian_solve(sj.DenseLU(), fn))
-        rec["dense_ms"] = median_time(lambda: dsolve(x, rhs), repeats)
+        rec["dense_ms"] = C.median_ms(lambda: dsolve(x, rhs), repeats)
         Xd, sign_d = dsolve(x, rhs)
         rec["max_rel_diff"] = float(jnp.max(jnp.abs(X - Xd)) / jnp.max(jnp.abs(Xd)))
         rec["sign_agrees"] = bool(sign == sign_d)
