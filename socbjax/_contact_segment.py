@@ -342,6 +342,8 @@ def contact_slot_rows(ends, points, s, sigma, F, tangent, bend, shape, length, o
         # band depend on it, but only intermittently at random points)
         location = slope + sigma + gaps
         magnitude = setup.force_scale * gaps * (1.0 + gaps)  # O(1) rows: the pattern check compares sums
+        # the normal part mixes the force's components, as in force_law_rows
+        force = (F - 0.5 * jnp.sum(F * grad, axis=-1, keepdims=True) * grad - magnitude[:, None] * grad) / setup.force_scale
     else:
         projected = sigma - jnp.clip(sigma - slope - bias, 0.0, 1.0)
         # d(∇φ·t)/dσ = l d²φ/ds², the projection row's slope: the projection where it is
@@ -361,9 +363,6 @@ def contact_slot_rows(ends, points, s, sigma, F, tangent, bend, shape, length, o
         near = near * active
         location = near * closest + (1.0 - near) * (sigma - 0.5)
         owned = active * handover_weight(s, end_slope, owns_start, owns_end, smooth)
-    if setup.dense:  # the normal part mixes the force's components (see force_law_rows)
-        force = (F - 0.5 * jnp.sum(F * grad, axis=-1, keepdims=True) * grad - magnitude[:, None] * grad) / setup.force_scale
-    else:
         force = force_law_rows(F, grad, gaps, owned, setup, length)
     rows = jnp.concatenate([location[:, None], force, shape], axis=1)
     return rows, gaps
