@@ -236,7 +236,11 @@ def factor_solve(vals, rhs, *, indices, indptr, n, transpose, permc_spec):
     if not np.all(np.isfinite(vals)):
         return np.full(rhs.shape, np.nan), 0.0
     try:
-        lu = spla.splu(sp.csc_matrix((vals, indices, indptr), shape=(n, n)), permc_spec=permc_spec)
+        matrix = sp.csc_matrix((vals, indices, indptr), shape=(n, n), copy=True)
+        # entries of the pattern that are exactly zero here (the idle contact slots of a near
+        # list, socbjax._contact_near) would only add fill: the same matrix without them
+        matrix.eliminate_zeros()
+        lu = spla.splu(matrix, permc_spec=permc_spec)
         X = lu.solve(np.array(rhs.T, order="F"), trans="T" if transpose else "N").T
         d = lu.U.diagonal()
         sign = 0 if np.any(d == 0) else (1 - 2 * (np.count_nonzero(d < 0) % 2))
