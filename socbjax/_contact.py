@@ -125,6 +125,13 @@ class Contact(eqx.Module):
         penetration below 1 % of d; default 0.1 EI/d² (mean EI): a force that bends the
         filament on the scale of its own diameter, beyond the rod model (actin: 84 pN).  It
         depends on the material, not on the discretisation: refining the nodes keeps the law.
+    slot_capacity : the most segments that carry the contact kernel at once (the segments
+        nearest to an obstacle, listed before each path step; the others carry the
+        contact-free kernel and idle slots, :mod:`socbjax._contact_near`).  Default: all
+        segments up to 96, else max(96, S/3).  More segments within ``reach`` of the contact
+        band stop the path with ``RESULTS.contact_capacity``.  Planes only, without
+        self-contact (a sphere's or a pair's slot is never idle); give S or more for every
+        segment.
     lumped : for comparison only: put each contact force on the segment's two nodes
         ((1 − σ)F and σF) instead of carrying it at its point (what node-based codes do; see
         ``docs/equations.md`` "Contact" for how much worse it is).
@@ -142,10 +149,11 @@ class Contact(eqx.Module):
     capacity: int | None = None
     per_segment: int = 4
     reach: float | None = None
+    slot_capacity: int | None = None
 
     def __init__(self, diameter=DEFAULT_DIAMETER, planes=(), self_contact=True, surfaces=True, *, obstacles=(),
                  activation=None, stiffness=None, force_limit=None, lumped=False, capacity=None, per_segment=4,
-                 reach=None):
+                 reach=None, slot_capacity=None):
         self.diameter = check_real("Contact diameter", diameter, "µm", low=0.0, traced_ok=False)
         self.planes = _obstacles("planes", planes, Plane)
         self.obstacles = _obstacles("obstacles", obstacles, Sphere)
@@ -162,6 +170,12 @@ class Contact(eqx.Module):
         self.capacity = None if capacity is None else check_int("capacity", capacity, minimum=1, maximum=10**6)
         self.per_segment = check_int("per_segment", per_segment, minimum=1, maximum=1024)
         self.reach = opt("reach", reach, "µm")
+        self.slot_capacity = None if slot_capacity is None else check_int("slot_capacity", slot_capacity, minimum=1,
+                                                                          maximum=10**7)
+        if self.slot_capacity is not None and (self.self_contact or self.obstacles):
+            raise ValueError(f"slot_capacity={self.slot_capacity} lists the segments near planes; it needs "
+                             f"self_contact=False and no spheres (got self_contact={self.self_contact}, "
+                             f"{len(self.obstacles)} spheres): leave slot_capacity=None")
 
     def as_dict(self) -> dict:
         """JSON-able description (stored in a compression result's ``parameters["contact"]``,
@@ -170,7 +184,16 @@ class Contact(eqx.Module):
                 "planes": [{"point_um": p.point.tolist(), "normal": p.normal.tolist()} for p in self.planes],
                 "spheres": [{"center_um": o.center.tolist(), "radius_um": o.radius} for o in self.obstacles],
                 "activation_um": self.activation, "stiffness_pN_per_um": self.stiffness,
-                "force_limit_pN": self.force_limit, "lumped": self.lumped}
+                "force_limit_pN": self.force_limit, "lumped": self.lumped,
+                "slot_capacity": self.slot_capacity}
+
+    def near_capacity(self, n_segments: int) -> int:
+        """K segments with the contact kernel for a network of ``n_segments`` (0: every
+        segment; see ``slot_capacity``)."""
+        if self.self_contact or self.obstacles:
+            return 0
+        K = max(96, -(-n_segments // 3)) if self.slot_capacity is None else self.slot_capacity
+        return 0 if K >= n_segments else K
 
     def law(self, EI_mean) -> tuple:
         """(δ µm, k pN/µm) of this contact for a network of mean EI (pN·µm²): the defaults of

@@ -176,4 +176,4 @@ def contact_setup(network: Network, contact: Contact | None, *, dense: bool = Fa
                         smooth_start=f(smooth_start), smooth_end=f(smooth_end), seg_owns_start=f(free_base),
                         adjacent=jnp.asarray(adjacent_segments(network)),
                         reach=f(reach), capacity=capacity, per_segment=contact.per_segment, dense=dense,
-                        lumped=contact.lumped)
+                        lumped=contact.lumped, slot_capacity=contact.near_capacity(S))

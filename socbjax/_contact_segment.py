@@ -95,10 +95,17 @@ class ContactSetup(eqx.Module):
     per_segment: int = eqx.field(static=True, default=0)  # pairs per segment and segments per hash cell
     dense: bool = eqx.field(static=True, default=False)  # template: every dependence switched on
     lumped: bool = eqx.field(static=True, default=False)  # forces lumped to nodes (comparison only)
+    slot_capacity: int = eqx.field(static=True, default=0)  # K near segments with the contact kernel; 0: all
 
     @property
     def n_obstacles(self) -> int:
         return len(self.kinds)
+
+    @property
+    def listed(self) -> bool:
+        """Whether only the near list's segments carry the contact kernel
+        (:mod:`socbjax._contact_near`; never in the pattern template)."""
+        return self.slot_capacity > 0 and not self.dense
 
 
 def _derivatives(theta, kappa, n, EI):

@@ -50,7 +50,7 @@ from ._root import DampedNewton, newton_result, root_find
 from ._solution import RESULTS
 
 __all__ = ["NaturalParameter", "PseudoArclength", "PathProblem", "PathState", "PathPoint", "NoRecorder",
-           "StepRecorder", "StepRecords", "follow_path", "start_path", "parametrisation"]
+           "StepRecorder", "StepRecords", "follow_path", "start_path", "parametrisation", "model_frames"]
 
 # ----------------------------------------------------------------- parametrisations
 class NaturalParameter(eqx.Module):
@@ -96,8 +96,11 @@ class PathProblem(eqx.Module):
     def residual(self, x, p, frames):
         return self.model.residual(self.unravel()(x), self.control0.towards(self.control1, p), frames)
 
-    def frames(self, x):
-        return self.model.frames(self.unravel()(x))
+    def frames(self, y):
+        """The model's frames at [x; p]: ``model.path_frames(state, control)`` where the model
+        has it (:meth:`socbjax.SOCBModel.path_frames`: the near list needs the probe face's
+        place), else ``model.frames(state)``."""
+        return model_frames(self.model, self.unravel()(y[:-1]), self.control0.towards(self.control1, y[-1]))
 
     def hold_pairs(self, y, frames):
         """[x; p] with the pair slots' ids set to the step's list (Newton's first step would put
@@ -105,14 +108,16 @@ class PathProblem(eqx.Module):
         hold = getattr(self.model, "hold_pairs", None)
         return y if hold is None else jnp.concatenate([ravel_pytree(hold(self.unravel()(y[:-1]), frames))[0], y[-1:]])
 
-    def admissible(self, x0, x1):
-        """(whether the step x0 → x1 passes the model's own test, whether the model's capacity
-        overflowed there): contact, no filament moved through an obstacle or another filament,
-        and no more contact pairs than slots (:meth:`socbjax.SOCBModel.step_admissible`)."""
+    def admissible(self, x0, y1, frames):
+        """(whether the step x0 → y1 = [x1; p1] under the step's ``frames`` passes the model's
+        own test, whether the model's capacity overflowed there): contact, no filament moved
+        through an obstacle or another filament, and no more contact pairs (near segments) than
+        slots (:meth:`socbjax.SOCBModel.step_admissible`)."""
         test = getattr(self.model, "step_admissible", None)
         if test is None:
             return jnp.asarray(True), jnp.asarray(False)
-        return test(self.unravel()(x0), self.unravel()(x1))
+        displacement = self.control0.towards(self.control1, y1[-1]).displacement
+        return test(self.unravel()(x0), self.unravel()(y1[:-1]), frames, displacement)
 
     def step_limit(self, y0, y1):
         """The largest fraction α ∈ (0, 1] of a Newton step y0 → y1 ([x; p] each) that the
@@ -122,6 +127,13 @@ class PathProblem(eqx.Module):
             return jnp.ones((), y0.dtype)
         at = lambda y: self.control0.towards(self.control1, y[-1])  # noqa: E731
         return test(self.unravel()(y0[:-1]), self.unravel()(y1[:-1]), at(y0), at(y1))
+
+
+def model_frames(model, state, control):
+    """``model.path_frames(state, control)`` where the model has it (the frames that depend on
+    the controls: :meth:`socbjax.SOCBModel.path_frames`), else ``model.frames(state)``."""
+    placed = getattr(model, "path_frames", None)
+    return model.frames(state) if placed is None else placed(state, control)
 
 
 def _corrector_limit(y, direction, args):
@@ -161,13 +173,14 @@ def _corrector_fn(y, args):
 
 def _correct(problem, guess, border, newton):
     """Newton on [F; g] from ``guess`` = [x̂; p̂]: (y, result, iterations, sign, tangent v)."""
-    frames = problem.frames(guess[:-1])
+    frames = problem.frames(guess)
     guess = problem.hold_pairs(guess, frames)
     args = jax.lax.stop_gradient((problem, frames, border[0], border[1], guess))
     sol = root_find(_corrector_fn, jax.lax.stop_gradient(guess), args, solver=newton,
                     options={"linear": {"border": args[2:4]}}, adjoint=NonDifferentiable())
     state = sol.state
-    return sol.value, newton_result(sol), state.iterations, state.stats["sign"], state.stats["tangent"], state.residual_norm
+    return (sol.value, newton_result(sol), state.iterations, state.stats["sign"], state.stats["tangent"],
+            state.residual_norm, args[1])
 
 
 # ---------------------------------------------------------------------- recorders
@@ -319,10 +332,10 @@ def _accept(c: PathState, problem, param, settings, y, guess, y1, converged, sig
 
 def _attempt(c: PathState, problem, param, settings, newton, recorder) -> PathState:
     y, guess, border = _predict(c, problem, param, settings)
-    y1, result, iterations, sign, v, residual_norm = _correct(problem, guess, border, newton)
+    y1, result, iterations, sign, v, residual_norm, frames = _correct(problem, guess, border, newton)
     converged = result == RESULTS.successful
     ok, tau1, sign_flip, fold = _accept(c, problem, param, settings, y, guess, y1, converged, sign, v)
-    admissible, overflow = problem.admissible(c.x, y1[:-1])
+    admissible, overflow = problem.admissible(c.x, y1, frames)
     ok = ok & (admissible | ~c.primed) & ~(overflow & converged)
     primed = c.primed
     fast = iterations <= settings.fast_iterations

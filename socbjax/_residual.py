@@ -41,16 +41,18 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, Float
 
+from ._contact_near import near_list, near_margins
 from ._contact_pairs import PairList, broad_phase, initial_pairs, merge_pairs, pair_extra, pair_rows, pair_width, segment_table
-from ._contact_segment import SLOT_WIDTH, ContactSetup, contact_segment_rows, initial_slots
+from ._contact_segment import SLOT_WIDTH, ContactSetup, initial_slots
 from ._contact_start import settle_locations
-from ._contact_spatial import SPATIAL_SLOT_WIDTH, initial_spatial_slots, spatial_contact_segment_rows
+from ._contact_spatial import SPATIAL_SLOT_WIDTH, initial_spatial_slots
 from ._geometry import orthonormal_complement
+from ._kernels import contact_kernel, near_kernel, segment_rows, state_tangents
 from ._junction import director_targets, moment_transfer, nodal_couple_transfer
 from ._network import Network, node_row_width
 from ._quadrature import SegmentQuadrature
-from ._segment import planar_segment_residual, planar_turn, spatial_segment_residual
-from ._twist import carried_directors, twist_targets
+from ._segment import planar_turn
+from ._twist import twist_targets
 
 __all__ = [
     "Control",
@@ -104,13 +106,6 @@ class SOCBState(eqx.Module):
 def n_twists(network: Network) -> int:
     """Number of frame-angle unknowns: N for a twisting network, else 0."""
     return network.n_nodes if network.twisting else 0
-
-
-def state_tangents(directors, dim: int) -> Array:
-    """Unit tangents [N, d] from SOCB directors (2D angles, 3D tangent vectors)."""
-    if dim == 2:
-        return jnp.stack([jnp.cos(directors), jnp.sin(directors)], axis=-1)
-    return directors / jnp.linalg.norm(directors, axis=-1, keepdims=True)
 
 
 def reference_scales(network: Network):
@@ -176,38 +171,6 @@ def slot_width(dim: int) -> int:
     return SLOT_WIDTH if dim == 2 else SPATIAL_SLOT_WIDTH
 
 
-def _twist_data(state, network):
-    """Per-segment (ψ_a, ψ_b, e_a, e_b, GJ, κ₀) of a twisting network, else None."""
-    if not network.twisting:
-        return None
-    a, b = network.segments[:, 0], network.segments[:, 1]
-    e = carried_directors(state_tangents(state.directors, 3), network)
-    return (state.twists[a], state.twists[b], e[a], e[b], network.GJ, network.natural_curvature)
-
-
-def _contact_kernel(state, network, contact, control, quad, frames, m_start, extra=None):
-    """(segment rows, slot rows, end forces, start-node loads, points, gaps, pair data or None)
-    of the segments with their contact slots, planar or spatial."""
-    r, d, m = state.positions, state.directors, state.moments
-    if network.dim == 2:
-        return contact_segment_rows(r, d, m, m_start, state.forces, state.contacts, network, contact, control, quad,
-                                    extra)
-    return spatial_contact_segment_rows(r, d, m, m_start, state.forces, state.contacts, network, contact, control, quad,
-                                        frames, _twist_data(state, network), extra)
-
-
-def _segment_rows(state, network, quad, frames, m_start):
-    a, b = network.segments[:, 0], network.segments[:, 1]
-    r, d, m = state.positions, state.directors, state.moments
-    if network.dim == 2:
-        kernel = jax.vmap(planar_segment_residual, in_axes=(0,) * 9 + (None, 0))
-        return kernel(r[a], d[a], m_start, r[b], d[b], m[b], state.forces, network.lengths, network.EI, quad,
-                      network.natural_curvature)
-    twist = _twist_data(state, network)
-    kernel = jax.vmap(spatial_segment_residual, in_axes=(0,) * 10 + (None, 0))
-    return kernel(r[a], d[a], m_start, r[b], d[b], m[b], state.forces, network.lengths, network.EI, frames, quad, twist)
-
-
 def _start_moments(state: SOCBState, network: Network, control: Control):
     """(moment at each segment's start less what the start node hands over [S], the handed-over
     moments at the nodes: junction, applied couples) — pN·µm."""
@@ -234,14 +197,19 @@ def socb_residual(state: SOCBState, network: Network, control: Control, frames: 
         if contact.capacity:
             frames, pair_frame = frames
             extra = pair_extra(state.pairs, pair_frame.table)
-        seg, slot_rows, end_forces, start_loads, _, _, at_pairs = _contact_kernel(
-            state, network, contact, control, quad, frames, m_start, extra)
+        if contact.listed:
+            frames, near = frames
+            seg, slot_rows, end_forces, start_loads = near_kernel(state, network, contact, control, quad, frames,
+                                                                   m_start, near)
+        else:
+            seg, slot_rows, end_forces, start_loads, _, _, at_pairs = contact_kernel(
+                state, network, contact, control, quad, frames, m_start, extra)
         loads = loads + _start_node_loads(start_loads, network)
         if pair_frame is not None:
             slot_rows = jnp.concatenate([slot_rows.ravel(), pair_rows(state.pairs, pair_frame, at_pairs, network,
                                                                       contact, (r, d))[0].ravel()])
     else:
-        seg = _segment_rows(state, network, quad, frames, m_start)
+        seg = segment_rows(state, network, quad, frames, m_start)
     imbalance = routed_nodal_force(state.forces, network, loads, end_forces)
     support = support_rows(r, imbalance, network, control)
     end_moment = (m - junction_node - couple_node) * (length_ref / EI_ref)
@@ -360,13 +328,22 @@ class SOCBModel(eqx.Module):
         """See :func:`socb_structure`."""
         return socb_structure(self.network, self.n_obstacles, self.n_pairs)
 
-    def frames(self, state: SOCBState):
+    def frames(self, state: SOCBState, control: Control | None = None):
         """Held fixed during a Newton solve: the 3D analysis bases, and with self-contact the
-        pair list rebuilt from ``state`` (:mod:`socbjax._contact_pairs`)."""
+        pair list rebuilt from ``state`` (:mod:`socbjax._contact_pairs`), or with
+        ``Contact(slot_capacity=...)`` the near list (:mod:`socbjax._contact_near`; the probe
+        face placed by ``control``'s displacement, 0 when None)."""
         bases = _frames(state, self.network)
-        if not self.n_pairs:
-            return bases
-        return bases, self.pair_list(state)
+        if self.n_pairs:
+            return bases, self.pair_list(state)
+        if self.contact is not None and self.contact.listed:
+            displacement = 0.0 if control is None else control.displacement
+            return bases, near_list(self.contact, self.network, state, jax.lax.stop_gradient(displacement))
+        return bases
+
+    def path_frames(self, state: SOCBState, control: Control):
+        """:meth:`frames` of a path step at ``control`` (the path's hook)."""
+        return self.frames(state, control)
 
     def hold_pairs(self, state: SOCBState, frames) -> SOCBState:
         """``state`` with its pair slots' ids set to those of ``frames`` (:meth:`frames`)."""
@@ -409,7 +386,7 @@ class SOCBModel(eqx.Module):
         m_start = _start_moments(state, net, control)[0]
         frame = self.pair_list(state, rebuild=False) if self.n_pairs else None
         extra = None if frame is None else pair_extra(state.pairs, frame.table)
-        _, _, end_forces, start_loads, points, gaps, at_pairs = _contact_kernel(
+        _, _, end_forces, start_loads, points, gaps, at_pairs = contact_kernel(
             state, net, c, control, self.quad, _frames(state, net), m_start, extra)
         s = jnp.clip(state.contacts[..., 0], 0.0, 1.0)
         counted = (c.active * jnp.where(s >= 1.0, c.owns_end, 1.0) * jnp.where(s <= 0.0, c.owns_start, 1.0)) > 0
@@ -423,7 +400,7 @@ class SOCBModel(eqx.Module):
                    jnp.concatenate([out[3], frame.ids[:, 0] >= 0]))
         return (*out, end_forces, both, _start_node_loads(start_loads, net))
 
-    def step_admissible(self, old: SOCBState, new: SOCBState):
+    def step_admissible(self, old: SOCBState, new: SOCBState, frames=None, displacement=0.0):
         """(admissible, overflow) of a path step.  Not admissible when a segment may have moved
         through a sphere or point obstacle or through another segment (a plane cannot be
         crossed unseen: the gap turns negative): each curve point of a segment moves by at
@@ -432,8 +409,15 @@ class SOCBModel(eqx.Module):
         pair that may have come closer (D_i + D_j ≥ its axis distance) must still have its
         closest points on the same sides of each other; pairs not in the list are farther than
         ``reach`` apart, so 2 max D < reach.  Overflow: the new state has more candidate pairs
-        than the capacity (``RESULTS.contact_capacity``)."""
+        than the capacity (``RESULTS.contact_capacity``).  With the near list (``frames`` of
+        the step, :mod:`socbjax._contact_near`) instead: not admissible when a segment outside
+        it reached the band of the closest-point rule (probe face at ``displacement`` µm);
+        overflow: more near segments than the list holds."""
         c = self.contact
+        if c is not None and c.listed and frames is not None:  # no segment outside the near list came near
+            outside = jnp.ones(self.network.n_segments, bool).at[frames[1].ids].set(False)
+            margin = near_margins(c, self.network, new.positions, displacement)
+            return ~jnp.any(outside & (margin < 0.0)), frames[1].overflow
         if c is None or ("sphere" not in c.kinds and not self.n_pairs):
             return jnp.asarray(True), jnp.asarray(False)
         net = self.network

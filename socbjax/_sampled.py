@@ -42,7 +42,7 @@ from ._residual import Control
 from ._result import CompressionResult
 from ._linear import BlockDiagonal
 from ._root import DampedNewton, root_find
-from ._path import follow_path, start_path
+from ._path import follow_path, model_frames, start_path
 from ._solution import RESULTS, ConvergenceError, result_message
 from ._sparsity import linear_solver_for
 
@@ -146,7 +146,8 @@ def _resolve(model, X, U, settings, inner):
                           max_backtracks=settings.max_backtracks, linear_solver=blocks)
     unravel = ravel_pytree(model.initial_state())[1]
     warm = jax.lax.stop_gradient(X)
-    frames = jax.lax.stop_gradient(jax.vmap(lambda x: model.frames(unravel(x)))(warm))  # analysis bases only
+    # analysis bases (and the near list of obstacle contact, with each sample's probe face)
+    frames = jax.lax.stop_gradient(jax.vmap(lambda x, u: model_frames(model, unravel(x), Control.make(1.0, u)))(warm, U))
     sol = root_find(_resolve_fn, warm.reshape(-1), (model, frames, U), solver=solver, adjoint=ImplicitAdjoint(blocks))
     X = sol.value.reshape(B, -1)
     residual = jnp.max(jnp.abs(jax.lax.stop_gradient(_resolve_fn(sol.value, (model, frames, U))).reshape(B, -1)), axis=1)

@@ -33,8 +33,8 @@ class RESULTS(optx.RESULTS):  # pyright: ignore
     )
     max_steps = "the continuation used up its step budget (PathSettings.max_steps / max_attempts)"
     contact_capacity = (
-        "more filament pairs came within contact range than the pair list holds (socbjax.Contact capacity / "
-        "per_segment); raise them"
+        "more filament pairs, or more segments near an obstacle, came within contact range than the lists hold "
+        "(socbjax.Contact capacity / per_segment, or slot_capacity); raise them"
     )
     not_equilibrium = "the start of the path is not an equilibrium (Newton did not converge there)"
     not_reached = "a requested sample lies beyond the part of the path that was followed"

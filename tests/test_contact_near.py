@@ -1,0 +1,82 @@
+"""The near list of obstacle contact (``Contact(slot_capacity=K)``): only the K segments
+nearest to a plane carry the contact kernel, the others the contact-free one.  Checked
+against the full model (every segment with its slots) through a channel column's contact,
+with derivatives; a list too short stops the path and says so; a step that brings an
+unlisted segment near a plane is refused."""
+
+import numpy as np
+import pytest
+
+import equinox as eqx
+import jax
+import socbjax as sj
+
+L, EI, D, H, DELTA = 1.0, 1.0, 0.01, 0.1, 1e-4
+N_SEGMENTS = 16
+
+
+def _channel():
+    net = sj.column(N_SEGMENTS + 1, length=L, EI=EI, dim=2, supports=("pinned", "pinned"))
+    walls = (sj.Plane([0, -H], [0, 1]), sj.Plane([0, H], [0, -1]))
+    return net, walls
+
+
+def _contact(walls, capacity):
+    return sj.Contact(diameter=D, planes=walls, self_contact=False, surfaces=False, activation=DELTA,
+                      slot_capacity=capacity)
+
+
+def test_a_near_list_follows_the_full_model_through_the_channel():
+    """13 of 16 segments listed: the same forces, gaps and contacts as every segment with its
+    slots (capacity ≥ S), before and after the column meets the wall, and the same derivatives
+    of the forces with respect to EI (one forward-mode pass each)."""
+    net, walls = _channel()
+    at = np.linspace(0.004, 0.03, 6)
+
+    def outputs(EI_scale, capacity):
+        res = sj.compress(net.replace(EI=net.EI * EI_scale), 0.03, at=at, contact=_contact(walls, capacity))
+        return res.force, res.min_gap, res.contact_count.astype(float)
+
+    (F_l, gap_l, count_l), (dF_l, _, _) = jax.jvp(lambda s: outputs(s, 13), (1.0,), (1.0,))
+    (F_f, gap_f, count_f), (dF_f, _, _) = jax.jvp(lambda s: outputs(s, N_SEGMENTS), (1.0,), (1.0,))
+    assert count_f[0] == 0 and count_f[-1] >= 1  # the column meets the wall on the way
+    np.testing.assert_allclose(np.asarray(F_l), np.asarray(F_f), rtol=1e-8, atol=1e-9)
+    np.testing.assert_allclose(np.asarray(gap_l), np.asarray(gap_f), rtol=1e-8, atol=1e-12)
+    np.testing.assert_array_equal(np.asarray(count_l), np.asarray(count_f))
+    np.testing.assert_allclose(np.asarray(dF_l), np.asarray(dF_f), rtol=1e-7, atol=1e-9)
+    assert np.all(np.isfinite(np.asarray(dF_f))) and abs(float(dF_f[-1])) > 0
+
+
+def test_a_near_list_too_short_stops_the_path_and_says_so():
+    net, walls = _channel()
+    res = sj.compress(net, 0.01, contact=_contact(walls, 3), throw=False)
+    assert res.result == sj.RESULTS.contact_capacity
+    with pytest.raises(sj.ConvergenceError, match="slot_capacity"):
+        sj.compress(net, 0.01, contact=_contact(walls, 3))
+
+
+def test_a_step_that_brings_an_unlisted_segment_near_a_plane_is_refused():
+    net, walls = _channel()
+    model = sj.make_model(net, contact=_contact(walls, 4))
+    state = model.initial_state()
+    frames = model.frames(state)
+    listed = np.asarray(frames[1].ids)
+    outside = int(np.setdiff1d(np.arange(N_SEGMENTS), listed)[0])
+    assert listed.size == 4
+
+    def lifted(segment, height):
+        nodes = np.asarray(net.segments)[segment]
+        return eqx.tree_at(lambda s: s.positions, state, state.positions.at[nodes, 1].add(height))
+
+    # the nodes of one segment lifted to within the contact band of the upper wall (gap 4δ)
+    near = H - D / 2 - 4 * DELTA
+    assert not bool(model.step_admissible(state, lifted(outside, near), frames)[0])
+    assert bool(model.step_admissible(state, lifted(int(listed[0]), near), frames)[0])
+    assert bool(model.step_admissible(state, lifted(outside, 0.2 * H), frames)[0])
+
+
+def test_slot_capacity_errors_name_the_argument():
+    with pytest.raises(ValueError, match="slot_capacity=5 .* self_contact=False"):
+        sj.Contact(slot_capacity=5)
+    with pytest.raises(ValueError, match="slot_capacity"):
+        sj.Contact(self_contact=False, slot_capacity=0)
