@@ -1,19 +1,22 @@
 """Where the time of a Newton iteration goes with contact (issue 15): the residual, the
-coloured sparse Jacobian and SuperLU, for a dendritic outcrop without contact and with the
-probe face and the substrate (``Contact(self_contact=False)``), at the same generic state
-(the straight reference state plus 1e-3 random noise, where J is regular).
+coloured sparse Jacobian and SuperLU, for a dendritic outcrop without contact, with the probe
+face and the substrate on every segment's kernel (``Contact(self_contact=False,
+slot_capacity=S)``) and with the default near list (only the K segments nearest a surface
+carry the contact kernel, ``socbjax._contact_near``), at the same generic state (the
+straight reference state plus 1e-3 random noise, where J is regular).
 
 Each part is timed three times after compilation (median).  The Jacobian is one JVP per
 colour (socbjax.ColouredSparseLU.values); the LU is scipy.sparse.linalg.splu on its
-non-zeros with COLAMD, as the solver does, plus one solve.
+non-zeros with COLAMD, the pattern's exact zeros dropped as the solver does, plus one solve.
 
 Writes ``contact_cost.json``.
 
 Run:  PYTHONPATH=. python benchmarks/contact_cost.py [--quick] [--out DIR]
-(default: 8 generations, 493 segments; --quick: 6 generations.  2026-12-07 on 2 cores, one
-of them busy, 8 generations: residual 1.6 / 10.1 ms, Jacobian 102 / 971 ms with 26 / 46
-colours, SuperLU 30 / 223 ms with 96,064 / 636,846 non-zeros, 7,659 / 17,519 unknowns,
-without / with contact.)
+(default: 8 generations, 493 segments; --quick: 6 generations.  2026-12-07 on 2 cores,
+nothing else running, 8 generations, no contact / every segment / near list with K = 165:
+residual 1.4 / 6.7 / 3.8 ms, Jacobian 48 / 483 / 233 ms with 26 / 46 / 46 colours, SuperLU
+and a solve 9 / 26 / 15 ms with 91,133 / 396,543 / 198,578 non-zeros factored (of 96,064 /
+636,846 / 636,846 in the pattern), 7,659 / 17,519 / 17,519 unknowns.)
 """
 
 from __future__ import annotations
