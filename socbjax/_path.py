@@ -172,7 +172,8 @@ def _corrector_fn(y, args):
 
 
 def _correct(problem, guess, border, newton):
-    """Newton on [F; g] from ``guess`` = [x̂; p̂]: (y, result, iterations, sign, tangent v)."""
+    """Newton on [F; g] from ``guess`` = [x̂; p̂]: (y, result, iterations, sign, tangent v,
+    residual norm, the step's frames)."""
     frames = problem.frames(guess)
     guess = problem.hold_pairs(guess, frames)
     args = jax.lax.stop_gradient((problem, frames, border[0], border[1], guess))

@@ -47,8 +47,8 @@ from ._contact_segment import SLOT_WIDTH, ContactSetup, initial_slots
 from ._contact_start import settle_locations
 from ._contact_spatial import SPATIAL_SLOT_WIDTH, initial_spatial_slots
 from ._geometry import orthonormal_complement
-from ._kernels import contact_kernel, near_kernel, segment_rows, state_tangents
 from ._junction import director_targets, moment_transfer, nodal_couple_transfer
+from ._kernels import contact_kernel, near_kernel, segment_rows, state_tangents
 from ._network import Network, node_row_width
 from ._quadrature import SegmentQuadrature
 from ._segment import planar_turn
