@@ -101,6 +101,7 @@ def test_the_newton_step_limit_stops_a_gap_at_its_stated_depth():
     assert limit(3 * delta, 1000 * delta) == 0.01  # the floor
 
 
+@pytest.mark.slow  # 25–42 s in CI; the suite's 10-minute budget
 def test_newton_comes_out_of_a_deep_guess_in_a_few_steps():
     """A soft cantilever's free tip pressed lightly onto a wall (equilibrium depth 1 − g/δ of
     about 0.01–0.02), Newton started from the contact-free shape, whose tip lies 0.5 δ or
@@ -338,6 +339,7 @@ def test_clamped_column_self_contact_follows_the_elastica_then_departs():
     assert after.any() and np.all(F[after] > f_free[after] + 1.0) and np.all(np.asarray(res.contact_count)[after] >= 1)
 
 
+@pytest.mark.slow  # 25–42 s in CI; the suite's 10-minute budget
 def test_more_pairs_than_the_capacity_stop_the_path_and_say_so():
     net, tip = two_filaments()
     small = sj.Contact(diameter=D, surfaces=False, stiffness=1e6, capacity=1)
