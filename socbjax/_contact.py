@@ -7,7 +7,10 @@ penetration).  Each (segment, obstacle) pair carries one contact slot: the close
 the segment's smooth SOCB curve to the obstacle (not a node: with 0.25–0.5 µm segments most
 contacts fall between nodes), where the contact force acts as an interior point force,
 carried exactly by the segment equations (:mod:`socbjax._contact_segment`,
-``docs/equations.md`` "Contact").
+``docs/equations.md`` "Contact").  On networks of more than 96 segments, with planes only
+and no self-contact, only the segments nearest to a plane evaluate that kernel; far from
+every plane a slot is idle and its segment's equations are the contact-free ones
+(``Contact.slot_capacity``, :mod:`socbjax._contact_near`).
 
 Contact law: a C² penalty on the gap (frictionless, along the obstacle's normal at the
 contact point),

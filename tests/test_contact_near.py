@@ -1,8 +1,9 @@
 """The near list of obstacle contact (``Contact(slot_capacity=K)``): only the K segments
 nearest to a plane carry the contact kernel, the others the contact-free one.  Checked
 against the full model (every segment with its slots): a cantilever pressed onto a wall,
-and (slow) a channel column's force curve through contact with forward-mode derivatives; a list too short stops the path and
-says so; a step that brings an unlisted segment near a plane is refused."""
+and (slow) a channel column's force curve through contact with forward-mode derivatives;
+a list too short stops the path and says so; a step that brings an unlisted segment near a
+plane is refused."""
 
 import numpy as np
 import pytest
@@ -49,7 +50,11 @@ def test_a_near_list_solves_a_pressed_cantilever_as_the_full_model():
     for a, b in zip(listed, full):
         np.testing.assert_allclose(np.asarray(a), np.asarray(b), rtol=1e-9, atol=1e-10)
     h = 1e-5
-    slope = lambda K: (float(_pressed(K, 1 + h).positions[-1, 1]) - float(_pressed(K, 1 - h).positions[-1, 1])) / (2 * h)  # noqa: E731
+
+    def slope(capacity):
+        up, down = _pressed(capacity, 1 + h), _pressed(capacity, 1 - h)
+        return (float(up.positions[-1, 1]) - float(down.positions[-1, 1])) / (2 * h)
+
     np.testing.assert_allclose(slope(4), slope(N_SEGMENTS), rtol=1e-6)
 
 
