@@ -32,7 +32,7 @@ import equinox as eqx
 import jax
 import jax.numpy as jnp
 
-from ._contact_segment import ContactSetup, rest_sigma, signed_distance
+from ._contact_segment import ContactSetup, near_band, rest_sigma, signed_distance
 
 __all__ = ["NearList", "near_margins", "near_list", "idle_slot_rows", "take_segments"]
 
@@ -59,7 +59,7 @@ def near_margins(setup: ContactSetup, network, positions, displacement) -> jax.A
     middle = 0.5 * (positions[a] + positions[b])
     axis = jnp.asarray(network.probe_direction, positions.dtype)
     length = network.lengths
-    band = jnp.maximum(10.0 * setup.activation, 0.05 * length)
+    band = near_band(length, setup.activation)
     columns = []
     for k in range(setup.n_obstacles):
         phi = jax.vmap(lambda r, k=k: signed_distance(setup, k, r, displacement, axis)[0])(middle)

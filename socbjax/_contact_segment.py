@@ -36,9 +36,10 @@ import numpy as np
 from ._contact import penalty_force
 from ._quadrature import coupling_matrix
 
-__all__ = ["ContactSetup", "SLOT_WIDTH", "planar_contact_segment", "segment_jumps", "contact_segment_rows", "initial_slots", "handover_weight",
-           "smoothstep", "end_blend", "location_bias", "near_weight", "contact_slot_rows", "signed_distance", "jump_corrections",
-           "corrected_quintic", "rest_sigma", "force_law_rows"]
+__all__ = ["ContactSetup", "SLOT_WIDTH", "planar_contact_segment", "segment_jumps", "contact_segment_rows",
+           "initial_slots", "handover_weight", "smoothstep", "end_blend", "location_bias", "near_weight",
+           "near_band", "contact_slot_rows", "signed_distance", "jump_corrections", "corrected_quintic",
+           "rest_sigma", "force_law_rows"]
 
 _MINV = np.linalg.inv(coupling_matrix(1.0))  # Hermite data (σ-units) -> monomial coefficients
 _POW = np.arange(6)
@@ -281,8 +282,14 @@ def near_weight(lowest, length, activation):
     judged on the *lowest possible* gap (µm) of the segment(s), smoothly over the band
     gap < max(10 δ, l/20) (a slot resting at σ = ½ would not see an inclined segment's end
     approach; every curve point lies within l/2 of its chord's midpoint)."""
-    band = jnp.maximum(10.0 * activation, 0.05 * length)
+    band = near_band(length, activation)
     return smoothstep(2.0 * (band - lowest) / band)
+
+
+def near_band(length, activation):
+    """max(10 δ, l/20) (µm): the lowest possible gap below which :func:`near_weight` is
+    positive (``length`` l µm, ``activation`` δ µm)."""
+    return jnp.maximum(10.0 * activation, 0.05 * length)
 
 
 def handover_weight(s, slopes, owns_start, owns_end, smooth):
