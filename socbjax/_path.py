@@ -93,14 +93,18 @@ class PathProblem(eqx.Module):
     def unravel(self):
         return ravel_pytree(self.model.initial_state())[1]
 
+    def control(self, p) -> Control:
+        """The controls at path parameter p (control0 at 0, control1 at 1)."""
+        return self.control0.towards(self.control1, p)
+
     def residual(self, x, p, frames):
-        return self.model.residual(self.unravel()(x), self.control0.towards(self.control1, p), frames)
+        return self.model.residual(self.unravel()(x), self.control(p), frames)
 
     def frames(self, y):
         """The model's frames at [x; p]: ``model.path_frames(state, control)`` where the model
         has it (:meth:`socbjax.SOCBModel.path_frames`: the near list needs the probe face's
         place), else ``model.frames(state)``."""
-        return model_frames(self.model, self.unravel()(y[:-1]), self.control0.towards(self.control1, y[-1]))
+        return model_frames(self.model, self.unravel()(y[:-1]), self.control(y[-1]))
 
     def hold_pairs(self, y, frames):
         """[x; p] with the pair slots' ids set to the step's list (Newton's first step would put
@@ -116,7 +120,7 @@ class PathProblem(eqx.Module):
         test = getattr(self.model, "step_admissible", None)
         if test is None:
             return jnp.asarray(True), jnp.asarray(False)
-        displacement = self.control0.towards(self.control1, y1[-1]).displacement
+        displacement = self.control(y1[-1]).displacement
         return test(self.unravel()(x0), self.unravel()(y1[:-1]), frames, displacement)
 
     def step_limit(self, y0, y1):
@@ -125,8 +129,7 @@ class PathProblem(eqx.Module):
         test = getattr(self.model, "newton_step_limit", None)
         if test is None:
             return jnp.ones((), y0.dtype)
-        at = lambda y: self.control0.towards(self.control1, y[-1])  # noqa: E731
-        return test(self.unravel()(y0[:-1]), self.unravel()(y1[:-1]), at(y0), at(y1))
+        return test(self.unravel()(y0[:-1]), self.unravel()(y1[:-1]), self.control(y0[-1]), self.control(y1[-1]))
 
 
 def model_frames(model, state, control):
