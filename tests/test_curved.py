@@ -196,7 +196,6 @@ def kirchhoff_tip(network, F, steps=6):
 BATHE = dict(radius=100.0, angle=45.0, EI=1e7 / 12, GJ=5e6 * 0.1406)  # unit square section, E = 1e7, ν = 0
 
 
-@pytest.mark.slow  # 17 s; the default suite keeps the 3D bend against Kirchhoff shooting
 def test_a_3d_arc_is_stress_free_and_bends_in_its_plane_as_the_planar_arc():
     arc3 = sj.arc(5, radius=2.0, angle=120.0, EI=0.071, GJ=0.05)  # 5 nodes: the Bathe test's program
     assert arc3.twisting

@@ -241,7 +241,6 @@ class _CountingColumn(ColumnModel):
         return super().probe_force(values, u, **kwargs)
 
 
-@pytest.mark.slow  # 25 s; the default suite checks the residuals of contact-point fits elsewhere
 def test_points_before_contact_at_every_allowed_shift_cost_no_equilibria():
     """A long approach (31 of 41 points before contact): the points that lie before contact at
     every contact point the bounds allow are not sent to the model, and the residuals equal
@@ -288,7 +287,6 @@ def test_contact_point_start_ignores_a_noise_spike_in_the_baseline():
     assert result.values["EI"] == pytest.approx(0.071, rel=0.02)
 
 
-@pytest.mark.slow  # 17 s; tests/test_goodness.py keeps the cropped approach in the noise estimate
 def test_the_cropped_approach_enters_the_noise_estimate():
     """A measured curve's approach reaches far before the fitted window (−¼ of the largest
     compression): the cropped points are kept in ``FitProblem.baseline``, averaged in bins of

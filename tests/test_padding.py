@@ -39,9 +39,7 @@ def assert_padding_changes_nothing(net, at, displacement):
     return padded, nodes
 
 
-# the straight twin is slow (19 s); the default suite keeps the thermal one, the same invariance on curved strands
-@pytest.mark.parametrize("thermal", [pytest.param(False, id="straight", marks=pytest.mark.slow),
-                                     pytest.param(True, id="thermal")])
+@pytest.mark.parametrize("thermal", [False, True], ids=["straight", "thermal"])
 def test_padding_changes_nothing_on_the_real_nodes(thermal):
     net = sj.dendritic_outcrop(generations=G, gap=3.0, seed=2, dim=2)  # 26 real segments of 30
     if thermal:  # naturally curved real strands; the inert pieces stay straight
