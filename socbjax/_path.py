@@ -50,7 +50,8 @@ from ._root import DampedNewton, newton_result, root_find
 from ._solution import RESULTS
 
 __all__ = ["NaturalParameter", "PseudoArclength", "PathProblem", "PathState", "PathPoint", "NoRecorder",
-           "StepRecorder", "StepRecords", "follow_path", "start_path", "parametrisation", "model_frames"]
+           "StepRecorder", "StepRecords", "follow_path", "start_path", "parametrisation", "model_frames",
+           "state_template", "state_unravel"]
 
 # ----------------------------------------------------------------- parametrisations
 class NaturalParameter(eqx.Module):
@@ -91,7 +92,7 @@ class PathProblem(eqx.Module):
     check: Array
 
     def unravel(self):
-        return ravel_pytree(self.model.initial_state())[1]
+        return state_unravel(self.model)
 
     def control(self, p) -> Control:
         """The controls at path parameter p (control0 at 0, control1 at 1)."""
@@ -130,6 +131,19 @@ class PathProblem(eqx.Module):
         if test is None:
             return jnp.ones((), y0.dtype)
         return test(self.unravel()(y0[:-1]), self.unravel()(y1[:-1]), self.control(y0[-1]), self.control(y1[-1]))
+
+
+def state_template(model):
+    """A state with ``model``'s structure (values unspecified): ``model.state_template()``
+    where the model has one (:meth:`socbjax.SOCBModel.state_template`: no contact start),
+    else ``model.initial_state()``."""
+    template = getattr(model, "state_template", None)
+    return model.initial_state() if template is None else template()
+
+
+def state_unravel(model):
+    """The function from a flat state [n] to ``model``'s state (:func:`state_template`)."""
+    return ravel_pytree(state_template(model))[1]
 
 
 def model_frames(model, state, control):
@@ -399,7 +413,7 @@ def path_weights(model, p_scale) -> Array:
     """Norm weights [n + 1] for probe paths: node positions and directors (× mean segment
     length, so in µm), averaged over nodes, and p scaled to µm by ``p_scale``; moments and
     forces grow along any path and would hide a jump between branches."""
-    zeros = jax.tree_util.tree_map(jnp.zeros_like, model.initial_state())
+    zeros = jax.tree_util.tree_map(jnp.zeros_like, state_template(model))
     ell = jnp.mean(model.network.lengths)
     fields = ("positions", "directors") if hasattr(zeros, "directors") else ("positions", "directions")
     ones = tuple(jnp.full_like(getattr(zeros, f), 1.0 if f == "positions" else ell**2) for f in fields)
@@ -410,6 +424,6 @@ def path_weights(model, p_scale) -> Array:
 def position_weights(model) -> Array:
     """Weights [n + 1] selecting the node positions (p weight 0): the corrector test of load
     ramps, which compares geometric changes only (forces and moments grow with λ)."""
-    zeros = jax.tree_util.tree_map(jnp.zeros_like, model.initial_state())
+    zeros = jax.tree_util.tree_map(jnp.zeros_like, state_template(model))
     positions = ravel_pytree(eqx.tree_at(lambda st: st.positions, zeros, jnp.ones_like(zeros.positions)))[0]
     return jnp.concatenate([positions, jnp.zeros(1, positions.dtype)])

@@ -12,10 +12,10 @@ import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
-from jax.flatten_util import ravel_pytree
 
 from ._checks import check_bool, check_choice, check_real, describe
 from ._network import Network, add_direction, is_traced
+from ._path import state_unravel
 from ._path_settings import PROBE_PATH, PathSettings
 from ._perturbation import default_perturbation, perturbation_pattern, perturbation_plan, strand_segments
 from ._residual import Control, routed_nodal_force, state_tangents
@@ -227,7 +227,7 @@ def observe(model, X, loads, U=None):
     force (pN, the sum of the magnitudes), contact points [c, d] (µm) and forces [c, d] (pN)
     of the c = S·C slots (zero force: not in contact)."""
     net = model.network
-    _, unravel = ravel_pytree(model.initial_state())
+    unravel = state_unravel(model)
     U = jnp.zeros(X.shape[0]) if U is None else jnp.asarray(U)
     contact = getattr(model, "contact", None)
     axis = jnp.asarray(net.probe_direction)

@@ -28,7 +28,7 @@ import jax.numpy as jnp
 import numpy as np
 from jax.flatten_util import ravel_pytree
 
-from ._path import PathProblem, StepRecorder, follow_path, path_weights, start_path
+from ._path import PathProblem, StepRecorder, follow_path, path_weights, start_path, state_unravel
 from ._path_settings import PathSettings
 from ._probe import observe
 from ._progress import Progress
@@ -81,7 +81,7 @@ def phase_problem(model, index, u0, u_max, settings: PathSettings) -> PathProble
 def settled_displacement(model, x) -> jax.Array:
     """u₀ (µm): the mean displacement of the probe nodes along the probe direction in state x."""
     net = model.network
-    positions = ravel_pytree(model.initial_state())[1](x).positions
+    positions = state_unravel(model)(x).positions
     moved = (positions - net.positions)[np.flatnonzero(net.probe)] @ jnp.asarray(net.probe_direction)
     return jnp.mean(moved)
 

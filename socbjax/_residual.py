@@ -276,7 +276,17 @@ class SOCBModel(eqx.Module):
     name = "socb"
 
     def initial_state(self) -> SOCBState:
-        """The unloaded straight reference state (an exact solution at zero load)."""
+        """The unloaded straight reference state (an exact solution at zero load): the
+        :meth:`state_template` with its contact slots settled on their closest points."""
+        state = self.state_template()
+        if self.contact is None:
+            return state
+        return settle_locations(self, state, Control.make(load_factor=0.0))
+
+    def state_template(self) -> SOCBState:
+        """The reference state before the contact start: the structure (shapes, dtypes) of
+        every state of this model.  Settling the slots (:meth:`initial_state`) runs a small
+        Newton solve, seconds of compilation that callers needing only the structure skip."""
         net = self.network
         if net.dim == 2:
             directors, moments = jnp.arctan2(net.tangents[:, 1], net.tangents[:, 0]), jnp.zeros(net.n_nodes)
@@ -287,9 +297,7 @@ class SOCBModel(eqx.Module):
                           contacts=(initial_slots(net, self.contact, directors) if net.dim == 2 else
                                     initial_spatial_slots(net, self.contact, directors)),
                           pairs=self._initial_pairs(net))
-        if self.contact is None:
-            return state
-        return settle_locations(self, state, Control.make(load_factor=0.0))
+        return state
 
     def _initial_pairs(self, net: Network):
         """Empty pair slots holding the pairs of the reference state's broad phase (so that

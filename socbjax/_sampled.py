@@ -42,7 +42,7 @@ from ._residual import Control
 from ._result import CompressionResult
 from ._linear import BlockDiagonal
 from ._root import DampedNewton, root_find
-from ._path import follow_path, model_frames, start_path
+from ._path import follow_path, model_frames, start_path, state_unravel
 from ._solution import RESULTS, ConvergenceError, result_message
 from ._sparsity import linear_solver_for
 
@@ -131,7 +131,7 @@ def _clip(u, lower, upper):
 
 def _resolve_fn(y, args):
     model, frames, U = args
-    unravel = ravel_pytree(model.initial_state())[1]
+    unravel = state_unravel(model)
     X = y.reshape(U.shape[0], -1)
     return jax.vmap(lambda x, f, u: model.residual(unravel(x), Control.make(1.0, u), f))(X, frames, U).reshape(-1)
 
@@ -144,7 +144,7 @@ def _resolve(model, X, U, settings, inner):
     blocks = BlockDiagonal(inner, B)
     solver = DampedNewton(atol=1e-2 * settings.atol, max_iterations=settings.max_iterations,
                           max_backtracks=settings.max_backtracks, linear_solver=blocks)
-    unravel = ravel_pytree(model.initial_state())[1]
+    unravel = state_unravel(model)
     warm = jax.lax.stop_gradient(X)
     # analysis bases (and the near list of obstacle contact, with each sample's probe face)
     frames = jax.lax.stop_gradient(jax.vmap(lambda x, u: model_frames(model, unravel(x), Control.make(1.0, u)))(warm, U))

@@ -28,7 +28,7 @@ from ._contact_model import contact_setup
 from ._equilibrium import Solution, node_angles_and_curvatures
 from ._jointed import JointedModel
 from ._network import Network, is_traced
-from ._path import NoRecorder, PathProblem, follow_path, position_weights, start_path
+from ._path import NoRecorder, PathProblem, follow_path, position_weights, start_path, state_template
 from ._path_settings import LOAD_RAMP, MAX_QUADRATURE_ORDER, PathSettings
 from ._quadrature import get_quadrature
 from ._residual import Control, SOCBModel, net_nodal_force
@@ -235,7 +235,7 @@ def solve(network: Network, forces=None, couples=None, *, model: str = "socb", s
     disc = make_model(loaded, model, quadrature_order=settings.quadrature_order, contact=contact)
     inner = linear_solver_for(disc, settings.linear_solver)
     if initial_state is not None and (jax.tree_util.tree_structure(initial_state)
-                                      != jax.tree_util.tree_structure(disc.initial_state())):
+                                      != jax.tree_util.tree_structure(state_template(disc))):
         raise TypeError(f"initial_state must be a state of the {model} model of this network "
                         f"(e.g. an earlier Solution.state), got {type(initial_state).__name__}")
     solution = _solve(disc, initial_state, settings.traced(), inner, implicit_adjoint(adjoint, inner))
