@@ -347,3 +347,19 @@ def test_more_pairs_than_the_capacity_stop_the_path_and_say_so():
     assert sol.result == sj.RESULTS.contact_capacity
     with pytest.raises(sj.ConvergenceError, match="capacity"):
         sj.solve(net, forces={tip: np.array([0.0, -3.0])}, contact=small)
+
+
+def test_the_state_template_has_the_settled_states_structure():
+    """``SOCBModel.state_template`` (what callers that need only the structure use: unravel,
+    path weights; no contact start) has the settled initial state's tree, shapes and dtypes,
+    and without contact it is the initial state itself."""
+    net = sj.cantilever(3, dim=2)
+    wall = sj.Plane([0.0, -0.05], [0.0, 1.0])
+    model = sj.make_model(net, contact=sj.Contact(diameter=0.01, planes=(wall,), self_contact=False, surfaces=False))
+    template, settled = model.state_template(), model.initial_state()
+    assert jax.tree_util.tree_structure(template) == jax.tree_util.tree_structure(settled)
+    for a, b in zip(jax.tree_util.tree_leaves(template), jax.tree_util.tree_leaves(settled)):
+        assert a.shape == b.shape and a.dtype == b.dtype
+    free = sj.make_model(net)
+    for a, b in zip(jax.tree_util.tree_leaves(free.state_template()), jax.tree_util.tree_leaves(free.initial_state())):
+        np.testing.assert_array_equal(np.asarray(a), np.asarray(b))
