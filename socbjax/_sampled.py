@@ -198,8 +198,10 @@ def compress_at(model, displacement, at=None, *, unload=False, perturbation=None
     net = model.network
     loaded = eqx.tree_at(lambda m: m.network, model, net.replace(loads=applied_loads(net, perturbation)))
     inner = linear_solver_for(loaded, settings.linear_solver, batched=True)
-    U, X, iterations, converged, stable, result, observed, u0 = _sampled(loaded, displacement, at, bool(unload),
-                                                                        settings.traced(), inner)
+    # displacement as an array: filter_jit holds a Python float static, and every new depth
+    # (each curve of a fit or batch) would compile the whole path again
+    U, X, iterations, converged, stable, result, observed, u0 = _sampled(loaded, jnp.asarray(displacement, jnp.float64), at,
+                                                                        bool(unload), settings.traced(), inner)
     positions, tangents, moments, forces, probe_force, axial, twists = observed[:7]
     count, min_gap, contact_force, contact_points, contact_forces = observed[7:]
     crossed = jnp.any(surface_crossing(net, positions, U) & converged)
