@@ -19,7 +19,6 @@ Run:  PYTHONPATH=. python benchmarks/gradient_cost.py [--quick] [--out DIR]
 
 from __future__ import annotations
 
-import time
 
 import _common  # noqa: F401  (sets OPENBLAS_NUM_THREADS before numpy loads)
 import jax
@@ -29,16 +28,6 @@ import numpy as np
 import socbjax as sj
 
 REPEAT = 5
-
-
-def _median_time(fn, repeat):
-    fn()  # compile
-    times = []
-    for _ in range(repeat):
-        t0 = time.perf_counter()
-        jax.block_until_ready(fn())
-        times.append(time.perf_counter() - t0)
-    return float(np.median(times))
 
 
 def _case(name, model, names, theta, displacement, samples, fd_check, repeat):
@@ -52,9 +41,10 @@ def _case(name, model, names, theta, displacement, samples, fd_check, repeat):
     data = forces(theta) * 1.01
     loss = jax.jit(lambda t: 0.5 * jnp.sum((forces(t) - data) ** 2))
     value_and_grad = jax.jit(jax.value_and_grad(lambda t: 0.5 * jnp.sum((forces(t) - data) ** 2)))
-    forward = _median_time(lambda: loss(theta), repeat)
-    gradient = _median_time(lambda: value_and_grad(theta), repeat)
-    path = _median_time(lambda: sj.compress(model.base, displacement, method="arclength", throw=False).force, repeat)
+    forward = _common.median_ms(lambda: loss(theta), repeat) / 1e3
+    gradient = _common.median_ms(lambda: value_and_grad(theta), repeat) / 1e3
+    path = _common.median_ms(lambda: sj.compress(model.base, displacement, method="arclength", throw=False).force,
+                             repeat) / 1e3
     row = {"case": name, "segments": model.base.n_segments, "parameters": len(names), "samples": samples,
            "forward_s": forward, "gradient_s": gradient, "path_only_s": path, "ratio": gradient / forward,
            "ratio_to_path": gradient / path}

@@ -50,15 +50,6 @@ LENGTH, EI, LOAD = 10.0, 1.0, 2.0  # µm, pN·µm², P L²/EI
 REPEATS = 7
 
 
-def _median_ms(f, repeats=REPEATS):
-    times = []
-    for _ in range(repeats):
-        t0 = time.perf_counter()
-        f()
-        times.append(time.perf_counter() - t0)
-    return 1e3 * float(np.median(times))
-
-
 def _network(family: str, size: int):
     import socbjax as sj
 
@@ -139,12 +130,12 @@ def measure(family: str, size: int) -> dict:
     step, sign = iteration(x)
     out["step_finite"] = bool(np.all(np.isfinite(np.asarray(step)))) and float(sign) != 0.0
     jax.block_until_ready(assemble(x))
-    out["iteration_ms"] = _median_ms(lambda: jax.block_until_ready(iteration(x)))
-    out["assembly_ms"] = _median_ms(lambda: jax.block_until_ready(assemble(x)))
+    out["iteration_ms"] = C.median_ms(lambda: iteration(x), REPEATS)
+    out["assembly_ms"] = C.median_ms(lambda: assemble(x), REPEATS)
     vals = np.asarray(assemble(x))
     rhs = np.asarray(-fn(x))
     A = sp.csc_matrix((vals, js.rows.a, js.indptr.a), shape=(js.n, js.n))
-    out["factor_solve_ms"] = _median_ms(lambda: spla.splu(A, permc_spec=js.permc_spec).solve(rhs))
+    out["factor_solve_ms"] = C.median_ms(lambda: spla.splu(A, permc_spec=js.permc_spec).solve(rhs), REPEATS)
     lu = spla.splu(A, permc_spec=js.permc_spec)
     out["lu_nnz"] = int(lu.L.nnz + lu.U.nnz)
     out["memory_mb"] = (xla_bytes + 12 * out["lu_nnz"] + 12 * js.nnz) / 2**20

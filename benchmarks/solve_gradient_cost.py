@@ -13,24 +13,10 @@ Run: ``PYTHONPATH=. python benchmarks/solve_gradient_cost.py [--quick]``.
 from __future__ import annotations
 
 import sys
-import time
 
 import _common as C  # noqa: I001  (sets OPENBLAS_NUM_THREADS before numpy)
-import numpy as np
 
 NAME = "solve_gradient_cost"
-
-
-def _median_time(fn, *args, repeats: int) -> float:
-    import jax
-
-    jax.block_until_ready(fn(*args))  # compile
-    times = []
-    for _ in range(repeats):
-        t0 = time.perf_counter()
-        jax.block_until_ready(fn(*args))
-        times.append(time.perf_counter() - t0)
-    return float(np.median(times))
 
 
 def case(n: int, dim: int, kind: str, repeats: int) -> dict:
@@ -51,9 +37,9 @@ def case(n: int, dim: int, kind: str, repeats: int) -> dict:
     solve = jax.jit(tip)
     grad = jax.jit(jax.grad(tip, argnums=(0, 1)))
     jacfwd = jax.jit(jax.jacfwd(tip, argnums=(0, 1)))
-    t_solve = _median_time(solve, EI, P, repeats=repeats)
-    t_grad = _median_time(grad, EI, P, repeats=repeats)
-    t_fwd = _median_time(jacfwd, EI, P, repeats=repeats)
+    t_solve = C.median_ms(lambda: solve(EI, P), repeats) / 1e3
+    t_grad = C.median_ms(lambda: grad(EI, P), repeats) / 1e3
+    t_fwd = C.median_ms(lambda: jacfwd(EI, P), repeats) / 1e3
     dEI, dP = (float(g) for g in grad(EI, P))
     return {"n": n, "dim": dim, "linear_solver": kind, "solve_s": t_solve, "grad_s": t_grad, "jacfwd_s": t_fwd,
             "grad_over_solve": t_grad / t_solve, "jacfwd_over_solve": t_fwd / t_solve,
