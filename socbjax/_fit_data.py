@@ -107,11 +107,19 @@ def _baseline(parts, retract_flags) -> ApproachBaseline | None:
 
 def _bin_ranges(c_raw: np.ndarray, binned: ForceCurve):
     """(low, high) [m] (µm) of the points of ``binned`` (:meth:`ForceCurve.binned` of raw
-    compressions ``c_raw``): the span of each bin's raw points widened by half the raw spacing
-    on each side (the compression each raw point stands for)."""
+    compressions ``c_raw``): the span of each bin's raw points widened by the half-spacing to
+    the next raw point on each side (the compression each raw point stands for; an end point
+    mirrors its one neighbour).  Local, not the median spacing: a simulated curve's adaptive
+    steps grow from nanometres at contact, and the median would extend the first bin past its
+    first point into the approach, where the model's force is 0."""
     span = np.asarray(binned.metadata["bin_span"], float)
-    half = 0.5 * float(np.median(np.diff(np.sort(c_raw))))
-    return span[:, 0] - half, span[:, 1] + half
+    c = np.sort(c_raw)
+    gaps = np.diff(c) if c.size > 1 else np.zeros(1)
+    below = 0.5 * np.concatenate([gaps[:1], gaps])  # [n] half-spacing below each raw point
+    above = 0.5 * np.concatenate([gaps, gaps[-1:]])
+    first = np.searchsorted(c, span[:, 0], side="left")
+    last = np.searchsorted(c, span[:, 1], side="right") - 1
+    return span[:, 0] - below[first], span[:, 1] + above[last]
 
 
 def _branch_data(curve, branch: str, max_points: int, min_compression):

@@ -322,6 +322,22 @@ def test_the_cropped_approach_enters_the_noise_estimate():
     assert sj.fit_problem((c[c >= -0.05], F[c >= -0.05]), model, free=("EI",)).data.baseline is None
 
 
+def test_bins_of_an_unevenly_sampled_curve_are_the_cells_of_their_raw_points():
+    """A simulated curve's adaptive steps grow from nanometres at contact: each bin stands for
+    the cells of its raw points (half-way to each neighbour), so the bins tile the curve
+    without gaps or overlaps and the first starts half a first step before its first point.
+    (With the median spacing a tenth of the first bin lay before contact, where the model's
+    force is 0: a simulated column's EI came out 1 % off, R² 0.26.)"""
+    c = np.geomspace(1e-6, 0.2, 40)
+    curve = sj.ForceCurve(c, 10.0 + c)
+    data = sj.fit_problem(curve, ColumnModel(4, dim=2), free=("EI",), max_points=12).data
+    cells = np.concatenate([[1.5 * c[0] - 0.5 * c[1]], 0.5 * (c[1:] + c[:-1]), [1.5 * c[-1] - 0.5 * c[-2]]])
+    assert 3 <= data.low.size <= 12 and data.low[0] == pytest.approx(cells[0], abs=1e-15)
+    np.testing.assert_allclose(data.low[1:], data.high[:-1], rtol=1e-12)  # contiguous
+    assert data.high[-1] == pytest.approx(cells[-1], rel=1e-12)
+    assert np.all(np.isin(np.round(data.low, 12), np.round(cells, 12)))  # every edge between raw points
+
+
 def test_a_binned_point_astride_contact_is_the_mean_over_its_bin():
     """The force of inextensible filaments jumps at contact, so the bin that holds the contact
     point averages raw points at zero force and in contact: the residuals compare each binned
