@@ -155,19 +155,6 @@ def test_traced_displacement_is_allowed():
     assert float(f(0.2)) == pytest.approx(float(f(0.3)), rel=1e-9)  # the sample does not depend on the range
 
 
-def test_a_new_depth_reuses_the_compiled_path(caplog):
-    """Called eagerly at another depth (each curve of a fit or batch has its own), compress(at=)
-    runs the program it compiled for the first depth, and a sample's force does not depend on
-    the depth (the loading branch is the same)."""
-    net = sj.column(4, supports=("pinned", "pinned"), dim=2, EI=0.071)
-    at = np.array([0.05, 0.1, 0.15])
-    first = np.asarray(sj.compress(net, 0.2, at=at).force)
-    with jax.log_compiles(True), caplog.at_level("DEBUG", logger="jax"):
-        second = np.asarray(sj.compress(net, 0.25, at=at).force)
-    assert not [r.getMessage() for r in caplog.records if "_sampled" in r.getMessage()]
-    np.testing.assert_allclose(second, first, rtol=1e-9)
-
-
 @pytest.mark.slow
 def test_gradient_with_respect_to_applied_loads():
     """Network loads are differentiable: a lateral load on the middle of a pinned column,

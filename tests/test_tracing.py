@@ -46,6 +46,19 @@ def test_compress_new_EI_perturbation_displacement_and_steps_do_not_retrace(trac
     assert abs(forces[1] - forces[0]) <= 1e-8 * abs(forces[0])
 
 
+def test_sampled_compress_at_new_depths_and_samples_does_not_retrace(traces):
+    """compress(at=...) eagerly at a new depth (each curve of a fit or batch has its own) and
+    new sample values runs the program of the first call; a sample's force does not depend on
+    the depth (the same loading branch)."""
+    net = sj.column(4, supports=("pinned", "pinned"), dim=2, EI=0.071)
+    first_force = np.asarray(sj.compress(net, 0.2, at=[0.05, 0.1, 0.15]).force)
+    first = len(traces)
+    again = np.asarray(sj.compress(net, 0.25, at=[0.05, 0.1, 0.15]).force)
+    sj.compress(net.replace(EI=net.EI * 2), 0.3, at=[0.1, 0.2, 0.3])
+    assert first > 0 and len(traces) == first, traces[first:]
+    np.testing.assert_allclose(again, first_force, rtol=1e-9)
+
+
 def test_jitted_user_function_of_a_network_traces_once(traces):
     """A network is a pytree of values with a static topology: jax.jit of a user function
     of it traces once for all values, and again only for a new topology."""
