@@ -34,14 +34,13 @@ import jax.numpy as jnp
 import numpy as np
 
 from ._contact import penalty_force
-from ._quadrature import coupling_matrix
+from ._quadrature import HERMITE_TO_MONOMIAL
 
 __all__ = ["ContactSetup", "SLOT_WIDTH", "planar_contact_segment", "segment_jumps", "contact_segment_rows",
            "initial_slots", "handover_weight", "smoothstep", "end_blend", "location_bias", "near_weight",
            "near_band", "contact_slot_rows", "signed_distance", "jump_corrections", "corrected_quintic",
            "rest_sigma", "force_law_rows"]
 
-_MINV = np.linalg.inv(coupling_matrix(1.0))  # Hermite data (σ-units) -> monomial coefficients
 _POW = np.arange(6)
 _JUMP_ORDERS = np.arange(2, 6)
 _FACT = np.array([2.0, 6.0, 24.0, 120.0])
@@ -201,7 +200,7 @@ def planar_contact_segment(ends, n_a, length, EI, kappa0, slots, owns_start, own
     data = jnp.stack([theta_a, length * (m_a / EI + kappa0), -length**2 * _cross(theta_a, n_a) / EI,
                       theta_a + turn - end_c[0], length * (m_b / EI + kappa0) - end_d1[0],
                       -length**2 * _cross(theta_a + turn, n_b) / EI - end_d2[0]])
-    coef = jnp.asarray(_MINV) @ data
+    coef = jnp.asarray(HERMITE_TO_MONOMIAL) @ data
     # composite Gauss–Legendre between the sorted force points (θ'' jumps there)
     breaks = jnp.concatenate([jnp.zeros(1), jnp.sort(s), jnp.ones(1)])
     widths = jnp.diff(breaks)

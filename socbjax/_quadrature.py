@@ -29,6 +29,7 @@ import numpy as np
 
 __all__ = [
     "coupling_matrix",
+    "HERMITE_TO_MONOMIAL",
     "quintic_coefficients",
     "gauss_legendre",
     "integration_matrix",
@@ -56,6 +57,10 @@ def coupling_matrix(length: float) -> np.ndarray:
             [0.0, 0.0, 2.0, 6 * l, 12 * l**2, 20 * l**3],
         ]
     )
+
+
+# Hermite end data in σ-units (θ, θ', θ'' at σ = 0 and 1) -> monomial coefficients in σ
+HERMITE_TO_MONOMIAL = np.linalg.inv(coupling_matrix(1.0))
 
 
 def quintic_coefficients(end_data: np.ndarray, length: float) -> np.ndarray:
@@ -95,19 +100,17 @@ def hermite_basis(points: tuple[float, ...]) -> np.ndarray:
     θ(σ_k) = Σ_j H[k, j] d_j with d = (θ_0, θ'_0, θ''_0, θ_1, θ'_1, θ''_1) in σ-units.
     """
     sigma = np.asarray(points, dtype=np.float64)
-    coeffs = np.linalg.inv(coupling_matrix(1.0))  # maps data -> coefficients
     monomials = sigma[:, None] ** np.arange(6)[None, :]
-    return monomials @ coeffs
+    return monomials @ HERMITE_TO_MONOMIAL
 
 
 @functools.lru_cache(maxsize=None)
 def hermite_basis_derivative(points: tuple[float, ...]) -> np.ndarray:
     """dH[k, j]/dσ at normalised points σ_k: θ'(σ_k) = Σ_j dH[k, j] d_j (per unit σ)."""
     sigma = np.asarray(points, dtype=np.float64)
-    coeffs = np.linalg.inv(coupling_matrix(1.0))
     powers = np.arange(6)
     monomials = powers[None, :] * sigma[:, None] ** np.maximum(powers - 1, 0)[None, :]
-    return monomials @ coeffs
+    return monomials @ HERMITE_TO_MONOMIAL
 
 
 class SegmentQuadrature:
