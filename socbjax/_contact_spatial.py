@@ -32,15 +32,14 @@ import jax.numpy as jnp
 import numpy as np
 
 from ._contact_segment import ContactSetup, contact_slot_rows, corrected_quintic, jump_corrections, rest_sigma
-from ._geometry import minimal_rotation, orthonormal_complement, sphere_exp, sphere_exp_differential_inverse
-from ._quadrature import coupling_matrix
-from ._segment import chart_data, end_jet, frame_angle, kirchhoff_jet, planar_turn
+from ._geometry import sphere_exp, sphere_exp_differential_inverse
+from ._quadrature import HERMITE_TO_MONOMIAL
+from ._segment import chart_data, end_jet, kirchhoff_jet, twist_rows
 
 __all__ = ["SPATIAL_SLOT_WIDTH", "spatial_jumps", "spatial_contact_segment", "spatial_contact_segment_rows",
            "initial_spatial_slots"]
 
 SPATIAL_SLOT_WIDTH = 10  # unknowns per 3D slot: σ, F (3), t (3), t' (3)
-_MINV = np.linalg.inv(coupling_matrix(1.0))  # Hermite data (σ-units) -> monomial coefficients
 _JUMP_ORDERS = np.arange(2, 6)
 
 
@@ -172,7 +171,7 @@ def _interpolant(ends, n_a, F, s, tangents, rates, length, EI, twist, template=F
     a = spatial_jumps(u, s, tangents, rates, twist_moment, F, n_a, length, EI, template)
     end = [c[0] for c in jump_corrections(jnp.ones(1), s, a)]
     data = data - jnp.stack([jnp.zeros(3), jnp.zeros(3), jnp.zeros(3), end[0], end[1], end[2]])
-    return u, w_a, w_b, jnp.asarray(_MINV) @ data, a, jet_a[0], jet_b[0], twist_moment
+    return u, w_a, w_b, jnp.asarray(HERMITE_TO_MONOMIAL) @ data, a, jet_a[0], jet_b[0], twist_moment
 
 
 def spatial_contact_segment(ends, n_a, length, EI, frame, slots, owns_start, owns_end, setup: ContactSetup,
@@ -229,7 +228,7 @@ def spatial_contact_segment(ends, n_a, length, EI, frame, slots, owns_start, own
     rows = [(chord - length * (W @ t)) / length, perp(balance) * length / EI,
             perp(EI * (w_b - w_a) - length * (W @ rates_w)) / EI]
     if twist is not None:
-        rows.append(_twist_rows(u, t, dt, m, W, t_a, t_b, twist, balance, length, EI))
+        rows.append(twist_rows(u, t, dt, m, W, t_a, t_b, twist, balance, length, EI)[0])
     w_k, dw_k = corrected_quintic(s, coef, s, a)
     t_k, dt_k = jax.vmap(lambda wk, dwk: jax.jvp(lambda z: sphere_exp(u, z), (wk,), (dwk,)))(w_k, dw_k)
     shape = jnp.concatenate([tangents - t_k[:C], length * rates - dt_k[:C]], axis=1)
@@ -240,20 +239,6 @@ def spatial_contact_segment(ends, n_a, length, EI, frame, slots, owns_start, own
     start_load = jnp.sum(every[:, 1:4] - F_node, axis=0) if setup.lumped else jnp.zeros(3)
     at_extra = (points[C:], t_k[C:], w_k[C:], dw_k[C:])
     return jnp.concatenate(rows), slot_rows, n_a - jnp.sum(F_node, axis=0), start_load, points[:C], gaps, at_extra
-
-
-def _twist_rows(u, t, dt, m, W, t_a, t_b, twist, balance, length, EI):
-    """The two rows of a twisting segment (Eq. 8 about u, the twist law) on the composite
-    quadrature (see :func:`socbjax._segment.spatial_segment_residual`; no natural curvature
-    on d1, d2, so the curve does not depend on the material angle)."""
-    psi_a, psi_b, e_a, e_b, GJ, kappa0 = twist
-    f = orthonormal_complement(u)[0]  # any f ⊥ u: nothing depends on it
-    alpha_a = frame_angle(t_a, minimal_rotation(u, t_a, f), e_a)
-    alpha_b = frame_angle(t_b, minimal_rotation(u, t_b, f), e_b)
-    omega = -jnp.einsum("i,ki->k", u, jnp.cross(t, dt)) / (1.0 + t @ u)
-    tau = jnp.sum(m * t, axis=1) / GJ + kappa0[2]
-    turn = psi_b + alpha_b - psi_a - alpha_a + length * (W @ omega)
-    return jnp.stack([jnp.dot(u, balance) * length / EI, planar_turn(0.0, turn) - length * (W @ tau)])
 
 
 def spatial_contact_segment_rows(positions, tangents, moments, m_start, forces, slots, network, setup: ContactSetup,

@@ -52,7 +52,7 @@ from jaxtyping import Array, Float
 from ._geometry import minimal_rotation, orthonormal_complement, sphere_exp, sphere_exp_differential_inverse, sphere_log_jet
 from ._quadrature import SegmentQuadrature
 
-__all__ = ["chart_data", "end_jet", "kirchhoff_jet", "frame_angle", "kirchhoff_segment_curve", "planar_turn", "turned_director", "planar_segment_residual", "spatial_segment_residual", "spatial_segment_tangents", "planar_segment_angles",
+__all__ = ["chart_data", "end_jet", "kirchhoff_jet", "frame_angle", "kirchhoff_segment_curve", "planar_turn", "turned_director", "twist_rows", "planar_segment_residual", "spatial_segment_residual", "spatial_segment_tangents", "planar_segment_angles",
            "planar_segment_curve", "spatial_segment_curve"]
 
 
@@ -214,7 +214,7 @@ def _kirchhoff_rows(r_a, t_a, m_a, r_b, t_b, m_b, n, length, EI, frame, quad, tw
     (α: the angle from E to e).  The twist law is ψ_b + α_b − ψ_a − α_a + ∫ω ds = ∫τ ds
     (mod 2π); φ at the quadrature points places the natural curvature vector there, which
     enters Eq. 9 as EI t' = (m + EI k) × t."""
-    psi_a, psi_b, e_a, e_b, GJ, kappa0 = twist
+    psi_a, kappa0 = twist[0], twist[5]
     u, w_a, w_b, w, t, dt, ta, tb = _kirchhoff_interpolant(t_a, m_a, t_b, m_b, n, length, EI, jnp.asarray(quad.basis),
                                                            jnp.asarray(quad.dbasis), twist)
     weights, chord = jnp.asarray(quad.weights), r_b - r_a
@@ -224,25 +224,37 @@ def _kirchhoff_rows(r_a, t_a, m_a, r_b, t_b, m_b, n, length, EI, frame, quad, tw
 
     offsets = length * (jnp.asarray(quad.integration) @ t)  # r(s_k) − r_a, [K, 3]
     m = m_a[None, :] - jnp.cross(offsets, n[None, :])
-    f = orthonormal_complement(u)[0]  # any f ⊥ u: nothing depends on it
-    E = minimal_rotation(u, t, f)  # [K, 3]
-    alpha_a = frame_angle(ta, minimal_rotation(u, ta, f), e_a)
-    alpha_b = frame_angle(tb, minimal_rotation(u, tb, f), e_b)
-    omega = -jnp.einsum("i,ki->k", u, jnp.cross(t, dt)) / (1.0 + t @ u)
-    tau = jnp.sum(m * t, axis=1) / GJ + kappa0[2]
+    balance = m_b - m_a + jnp.cross(chord, n)
+    twist_eq, (alpha_a, omega, tau) = twist_rows(u, t, dt, m, weights, ta, tb, twist, balance, length, EI)
+    E = minimal_rotation(u, t, orthonormal_complement(u)[0])  # [K, 3], from the f of twist_rows
     phi = psi_a + alpha_a + length * (jnp.asarray(quad.integration) @ (tau - omega))
     d1 = turned_director(t, E, phi)
     k = kappa0[0] * d1 + kappa0[1] * jnp.cross(t, d1)
     rates = jax.vmap(sphere_exp_differential_inverse, in_axes=(None, 0, 0))(u, w, jnp.cross(m + EI * k, t))
-    turn = psi_b + alpha_b - psi_a - alpha_a + length * (weights @ omega)
-    balance = m_b - m_a + jnp.cross(chord, n)
     return jnp.concatenate([
         (chord - length * (weights @ t)) / length,
         perp(balance) * length / EI,
         perp(EI * (w_b - w_a) - length * (weights @ rates)) / EI,
-        jnp.stack([jnp.dot(u, balance) * length / EI,
-                   planar_turn(0.0, turn) - length * (weights @ tau)]),
+        twist_eq,
     ])
+
+
+def twist_rows(u, t, dt, m, weights, t_a, t_b, twist, balance, length, EI):
+    """The two rows of a twisting segment (Eq. 8 about u, the twist law; see
+    :func:`_kirchhoff_rows`) from its unit tangents t and their derivatives t' [K, 3]
+    (1/µm) and moments m [K, 3] (pN·µm) at stations of quadrature weights [K] (σ-units), the
+    end tangents, ``twist`` (ψ_a, ψ_b, e_a, e_b, GJ, κ₀) and the moment balance [3] (pN·µm);
+    with (α_a, ω [K], τ [K]) for the material angle along the segment.  The contact kernel's
+    composite quadrature calls it too."""
+    psi_a, psi_b, e_a, e_b, GJ, kappa0 = twist
+    f = orthonormal_complement(u)[0]  # any f ⊥ u: nothing depends on it
+    alpha_a = frame_angle(t_a, minimal_rotation(u, t_a, f), e_a)
+    alpha_b = frame_angle(t_b, minimal_rotation(u, t_b, f), e_b)
+    omega = -jnp.einsum("i,ki->k", u, jnp.cross(t, dt)) / (1.0 + t @ u)
+    tau = jnp.sum(m * t, axis=1) / GJ + kappa0[2]
+    turn = psi_b + alpha_b - psi_a - alpha_a + length * (weights @ omega)
+    rows = jnp.stack([jnp.dot(u, balance) * length / EI, planar_turn(0.0, turn) - length * (weights @ tau)])
+    return rows, (alpha_a, omega, tau)
 
 
 def spatial_segment_residual(
