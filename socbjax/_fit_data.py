@@ -113,8 +113,8 @@ def _bin_ranges(c_raw: np.ndarray, binned: ForceCurve):
     steps grow from nanometres at contact, and the median would extend the first bin past its
     first point into the approach, where the model's force is 0."""
     span = np.asarray(binned.metadata["bin_span"], float)
-    c = np.sort(c_raw)
-    gaps = np.diff(c) if c.size > 1 else np.zeros(1)
+    c = np.sort(c_raw)  # more than max_points ≥ 3 points (it was binned)
+    gaps = np.diff(c)
     below = 0.5 * np.concatenate([gaps[:1], gaps])  # [n] half-spacing below each raw point
     above = 0.5 * np.concatenate([gaps, gaps[-1:]])
     first = np.searchsorted(c, span[:, 0], side="left")
