@@ -37,9 +37,9 @@ def test_solve_under_jit_grad_jacfwd_vmap():
     assert float(jax.jacfwd(_tip)(EI, P)) == pytest.approx(float(dEI), rel=1e-10)
     EIs, Ps = jnp.array([0.8, 1.3, 2.0]), jnp.array([1.0, 1.7, 0.5])
     np.testing.assert_allclose(jax.vmap(_tip)(EIs, Ps), [float(_tip(e, p)) for e, p in zip(EIs, Ps)], rtol=1e-12)
-    batched = jax.jit(jax.vmap(jax.grad(_tip, argnums=1)))(EIs, Ps)  # a composition
-    np.testing.assert_allclose(batched[1], float(dP), rtol=1e-10)
-    np.testing.assert_allclose(EIs * jax.vmap(jax.grad(_tip))(EIs, Ps), -Ps * batched, rtol=1e-8)
+    batched_EI, batched_P = jax.jit(jax.vmap(jax.grad(_tip, argnums=(0, 1))))(EIs, Ps)  # a composition
+    np.testing.assert_allclose(batched_P[1], float(dP), rtol=1e-10)
+    np.testing.assert_allclose(EIs * batched_EI, -Ps * batched_P, rtol=1e-8)
 
 
 @pytest.mark.slow  # suite time; in the default suite: solve under every transformation: test_solve_under_jit_grad_jacfwd_vmap; curve quantities: tests/test_equilibrium.py
@@ -82,14 +82,23 @@ def _sampled_force(EI):
     return sj.compress(net, 0.25, at=AT).force
 
 
-def test_sampled_compression_under_jit_grad_jacfwd_vmap():
+def test_sampled_compression_under_jit_and_vmap():
+    """jit and vmap here; jacfwd (dF/dEI = F/EI, dF/du against the closed form) and grad (central
+    differences past buckling) of compress(at=...) in the default suite's tests/test_sampled.py,
+    both here under `pytest -m slow` (each compiles the whole sampled path again: ~20 s)."""
+    EI = 0.071
+    F = np.asarray(_sampled_force(EI))
+    np.testing.assert_allclose(jax.jit(_sampled_force)(EI), F, rtol=1e-12)
+    np.testing.assert_allclose(jax.vmap(_sampled_force)(jnp.array([EI, 2 * EI])), np.stack([F, 2 * F]), rtol=1e-8)
+
+
+@pytest.mark.slow
+def test_sampled_compression_under_grad_and_jacfwd():
     EI = 0.071
     F = np.asarray(_sampled_force(EI))
     np.testing.assert_allclose(jax.jacfwd(_sampled_force)(EI), F / EI, rtol=1e-6)  # F ∝ EI
     g = float(jax.grad(lambda e: jnp.sum(_sampled_force(e)))(EI))
     assert g == pytest.approx(F.sum() / EI, rel=1e-6)
-    np.testing.assert_allclose(jax.jit(_sampled_force)(EI), F, rtol=1e-12)
-    np.testing.assert_allclose(jax.vmap(_sampled_force)(jnp.array([EI, 2 * EI])), np.stack([F, 2 * F]), rtol=1e-8)
 
 
 @pytest.mark.slow
