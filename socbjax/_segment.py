@@ -225,8 +225,8 @@ def _kirchhoff_rows(r_a, t_a, m_a, r_b, t_b, m_b, n, length, EI, frame, quad, tw
     offsets = length * (jnp.asarray(quad.integration) @ t)  # r(s_k) − r_a, [K, 3]
     m = m_a[None, :] - jnp.cross(offsets, n[None, :])
     balance = m_b - m_a + jnp.cross(chord, n)
-    twist_eq, (alpha_a, omega, tau) = twist_rows(u, t, dt, m, weights, ta, tb, twist, balance, length, EI)
-    E = minimal_rotation(u, t, orthonormal_complement(u)[0])  # [K, 3], from the f of twist_rows
+    twist_eq, (f, alpha_a, omega, tau) = twist_rows(u, t, dt, m, weights, ta, tb, twist, balance, length, EI)
+    E = minimal_rotation(u, t, f)  # [K, 3]: the frames that α_a and ω refer to
     phi = psi_a + alpha_a + length * (jnp.asarray(quad.integration) @ (tau - omega))
     d1 = turned_director(t, E, phi)
     k = kappa0[0] * d1 + kappa0[1] * jnp.cross(t, d1)
@@ -244,7 +244,8 @@ def twist_rows(u, t, dt, m, weights, t_a, t_b, twist, balance, length, EI):
     :func:`_kirchhoff_rows`) from its unit tangents t and their derivatives t' [K, 3]
     (1/µm) and moments m [K, 3] (pN·µm) at stations of quadrature weights [K] (σ-units), the
     end tangents, ``twist`` (ψ_a, ψ_b, e_a, e_b, GJ, κ₀) and the moment balance [3] (pN·µm);
-    with (α_a, ω [K], τ [K]) for the material angle along the segment.  The contact kernel's
+    with (f, α_a, ω [K], τ [K]) for the material angle along the segment (f ⊥ u: the
+    vector the minimal-rotation frames start from).  The contact kernel's
     composite quadrature calls it too."""
     psi_a, psi_b, e_a, e_b, GJ, kappa0 = twist
     f = orthonormal_complement(u)[0]  # any f ⊥ u: nothing depends on it
@@ -254,7 +255,7 @@ def twist_rows(u, t, dt, m, weights, t_a, t_b, twist, balance, length, EI):
     tau = jnp.sum(m * t, axis=1) / GJ + kappa0[2]
     turn = psi_b + alpha_b - psi_a - alpha_a + length * (weights @ omega)
     rows = jnp.stack([jnp.dot(u, balance) * length / EI, planar_turn(0.0, turn) - length * (weights @ tau)])
-    return rows, (alpha_a, omega, tau)
+    return rows, (f, alpha_a, omega, tau)
 
 
 def spatial_segment_residual(
