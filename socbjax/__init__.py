@@ -43,7 +43,7 @@ __all__ = [
     "SOCBModel", "SOCBState", "JointedModel", "JointedState", "Control",
     "coupling_matrix", "quintic_coefficients", "gauss_legendre",
     # fitting and data
-    "fit", "fit_problem", "FitProblem", "FitData", "ApproachBaseline", "FitRangeError", "FitResult", "FitSettings", "FitModel", "ColumnModel", "UnitMeshModel",
+    "fit", "fit_problem", "FitProblem", "FitResiduals", "FitData", "ApproachBaseline", "FitRangeError", "FitResult", "FitSettings", "FitModel", "ColumnModel", "UnitMeshModel",
     "OutcropModel", "LawnModel", "check_dimension", "collect_curve_files", "read_curve", "FIT_MODELS", "make_fit_model", "Parameter", "NUISANCE_PARAMETERS", "ForceCurve", "load_curve",
     "save_curve", "example_files", "example_file", "example_descriptions",
     # batch fits

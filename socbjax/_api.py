@@ -32,6 +32,7 @@ from ._fit_figure import plot_fit, save_fit_figure  # noqa: E402
 from ._lawn_figure import plot_lawn  # noqa: E402
 from ._fit_data import ApproachBaseline, FitData
 from ._fit_problem import FitProblem, FitRangeError, fit_problem  # noqa: E402
+from ._fit_residuals import FitResiduals  # noqa: E402
 from ._goodness import (  # noqa: E402
     Goodness, RunsTest, estimate_noise, goodness_of_fit, information_criteria, lag1_autocorrelation, runs_test,
 )

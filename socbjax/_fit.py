@@ -14,19 +14,20 @@ determines only the product EI × force_scale.
 from __future__ import annotations
 
 import dataclasses
+import functools
 import json
 import math
 import sys
 import time
 
 import equinox as eqx
-import jax
 import jax.numpy as jnp
 import numpy as np
 
 from ._afm import hysteresis_energy
 from ._io import finite_json
 from ._fit_problem import BRANCHES, check_start, fit_problem, scaled_start
+from ._fit_residuals import loss, loss_and_gradient, residuals_and_jacobian
 from ._goodness import judge_fit
 from ._least_squares import gauss_newton_uncertainties, levenberg_marquardt, optax_minimise
 from ._path_settings import PathSettings
@@ -240,14 +241,6 @@ def _float_values(values: dict) -> dict:
 
 
 # ------------------------------------------------------------------------------ fit
-def _with_value(fn):
-    def both(z):
-        r = fn(z)
-        return r, r
-
-    return both
-
-
 def _optimise(problem, settings: FitSettings, jac, report, bar):
     """Run the chosen optimiser: (z, history, converged, message, evaluations)."""
     if settings.optimizer == "lm":
@@ -255,9 +248,9 @@ def _optimise(problem, settings: FitSettings, jac, report, bar):
             jac, problem.z0, settings.max_iterations, settings.tolerance, report, bar.rejected, settings.se_tolerance)
         return z, history, converged, message, evaluations
     bar.note(f"compiling the loss's gradient ({settings.optimizer})")
-    loss = lambda z: 0.5 * jnp.sum(problem.residuals(z) ** 2)
-    return optax_minimise(jax.jit(jax.value_and_grad(loss)), jax.jit(loss), problem.z0, settings.optimizer,
-                  settings.max_iterations, settings.tolerance, settings.learning_rate, report)
+    return optax_minimise(functools.partial(loss_and_gradient, problem.residuals), functools.partial(loss, problem.residuals),
+                          problem.z0, settings.optimizer, settings.max_iterations, settings.tolerance,
+                          settings.learning_rate, report)
 
 
 def fit(curve, model="unit-mesh", *, free=("EI",), fixed: dict | None = None, initial: dict | None = None,
@@ -314,8 +307,9 @@ def fit(curve, model="unit-mesh", *, free=("EI",), fixed: dict | None = None, in
              f"{plural(len(problem.free), 'free parameter')} ({', '.join(problem.free)}); evaluating the {problem.model.name} "
              "model and its Jacobian at the start (the first evaluation compiles them: tens of seconds)")
     # One compiled program (the residuals and their Jacobian) serves the start's checks, the
-    # optimiser and the uncertainties; a start that fails is diagnosed afterwards.
-    jac = jax.jit(jax.jacfwd(_with_value(problem.residuals), has_aux=True))
+    # optimiser and the uncertainties, and every later fit of this model, free names and data
+    # size (the data are its inputs); a start that fails is diagnosed afterwards.
+    jac = functools.partial(residuals_and_jacobian, problem.residuals)
 
     def residuals(z):
         return jac(jnp.asarray(z))[1]

@@ -24,12 +24,14 @@ import numpy as np
 
 from ._afm import ForceCurve
 from ._compress import compress
-from ._fit_data import FitData, bin_evaluation_points, bin_mean_force, fit_data
-from ._fit_model import FitModel, contact_shift, data_terms
+from ._fit_data import FitData, fit_data
+from ._fit_model import FitModel, contact_shift
+from ._fit_residuals import FitResiduals, padded_touch
 from ._goodness import estimate_noise
 from ._models import make_fit_model
 from ._parameters import NUISANCE_PARAMETERS, Parameter
 from ._path_settings import PathSettings
+from ._probe import compress_settings
 from ._solution import RESULTS, ConvergenceError
 
 __all__ = ["FitProblem", "fit_problem", "BRANCHES", "FitRangeError", "PYTHON_FIXES", "stiffness_sources", "check_start",
@@ -99,8 +101,10 @@ class FitRangeError(ValueError):
 class FitProblem:
     """Everything :func:`socbjax.fit` optimises (see :func:`fit_problem`).
 
-    residuals : z [p] -> r [m] = (model − data)/σ, traced and differentiable; NaN where the
-        path cannot be followed (``throw=True``: raise instead, untraced).
+    residuals : a :class:`socbjax.FitResiduals`, z [p] -> r [m] = (model − data)/σ, traced
+        and differentiable; NaN where the path cannot be followed (``throw=True``: raise
+        instead, untraced).  A pytree with the data as arrays: ``eqx.filter_jit`` functions
+        of it (:func:`socbjax.fit`'s Jacobian) compile once for every curve of a model.
     to_values : z -> {name: value} (free and fixed parameters, in their units).
     z0 : [p] the unconstrained start; free : the free names, in the order of z.
     compression, force, sigma : [m] the data fitted (µm, pN, pN).
@@ -282,41 +286,29 @@ def fit_problem(curve, model="unit-mesh", *, free=("EI",), fixed=None, initial=N
                             size=None if size is None else (model.size_option, size),
                             safe=model.reach_fraction * model.gap if model.size_option else None)
     physical = [n for n in (*free, *fixed) if n in model.parameters]
-
-    def to_values(z):
-        values = {n: table[n].to_value(z[i]) for i, n in enumerate(free)}
-        return {**fixed, **values}
-
     sigma = _sigma(sigma, c.size, curve)
-    c_j, F_j, sigma_j = jnp.asarray(c), jnp.asarray(F), jnp.asarray(sigma)
-    unload = retract is not None
     # Points before contact at every allowed contact shift have model force 0 whatever the
     # values: only the others are sent to the model (a real curve's long approach costs no
     # equilibria).  All points when a free contact term has an open bound.
     touch = np.flatnonzero(data.high + _largest_shift(table, free, fixed) > 0)
-    touch = touch if touch.size else np.arange(c.size)
-    sub_retract = None if retract is None else np.asarray(retract, bool)[touch]
-
-    def residuals(z, throw: bool = False):
-        values = to_values(z)
-        shift = contact_shift(values)
-        u = bin_evaluation_points(data, shift)[touch]
-        sampled, ok = model.probe_force(values, u, reach=reach, retract=sub_retract, method=method, settings=path,
-                                        throw=throw)
-        # a binned point is the mean over its bin: the bin astride contact is partly at zero force
-        force = bin_mean_force(data, shift, jnp.zeros(c.size, sampled.dtype).at[touch].set(sampled))
-        # a path that fails at these values, or whose nodes cross the surface (not physical: no
-        # contact model), gives NaN residuals: the optimiser rejects the step
-        return jnp.where(ok, (data_terms(values, force, c_j) - F_j) / sigma_j, jnp.nan)
+    touch = padded_touch(touch if touch.size else np.arange(c.size))
+    bound = lambda value: None if value is None else np.asarray(float(value))  # noqa: E731
+    residuals = FitResiduals(
+        model=model, free=free, lower=tuple(bound(table[n].lower) for n in free),
+        upper=tuple(bound(table[n].upper) for n in free), fixed={n: float(v) for n, v in fixed.items()},
+        compression=c, force=F, sigma=sigma, low=data.low, high=data.high, touch=touch, reach=np.asarray(reach),
+        retract=None if retract is None else tuple(np.asarray(retract, bool)[touch].tolist()), method=method,
+        # filled and capped at the concrete reach here (as compress would), traced in the program
+        settings=compress_settings(path, method, reach).traced())
 
     def full_path(z):
-        values = to_values(z)
+        values = residuals.to_values(z)
         network = model.network({n: values[n] for n in physical})
-        return compress(network, reach, unload=unload, method=method, settings=path,
+        return compress(network, reach, unload=retract is not None, method=method, settings=path,
                         perturbation=values.get("perturbation"), throw=False)
 
     z0 = jnp.asarray([table[n].to_z(start[n]) for n in free])
-    return FitProblem(residuals=residuals, to_values=to_values, z0=z0, free=free, fixed=fixed, compression=c, force=F,
+    return FitProblem(residuals=residuals, to_values=residuals.to_values, z0=z0, free=free, fixed=fixed, compression=c, force=F,
                       sigma=sigma, table=table, model=model, reach=reach, path=full_path, retract=retract,
                       data=data)
 

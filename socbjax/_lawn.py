@@ -254,8 +254,8 @@ class LawnModel(FitModel):
         total = jnp.zeros((self.n_outcrops, u.shape[0]))
         ok = jnp.ones(self.n_outcrops, bool)
         for branch in sorted(set(on_retract.tolist())):
-            forces, fine = self.outcrop_forces(values, jnp.asarray(grid), reach=reach,
-                                               retract=np.ones(grid.size, bool) if branch else None, method=method,
+            forces, fine = self.outcrop_forces(values, grid, reach=reach,
+                                               retract=np.ones(grid.shape[0], bool) if branch else None, method=method,
                                                settings=settings)
             value = jax.vmap(lambda f: _integral(grid, f, u))(forces)
             total = jnp.where(on_retract[None, :] == branch, 2 * math.pi * self.probe_radius * density * value, total)
@@ -417,22 +417,24 @@ def _batches(members, generations: int):
     return groups, tuple(padded), stacked
 
 
-def _travel_grid(reach: float) -> np.ndarray:
+def _travel_grid(reach):
     """Probe travels (µm) at which F̄ is solved for the sphere: geometric near contact, where
     the force of an inextensible network rises to its buckling plateau within ~1e-4 of the
-    travel, then uniform; the first point is F̄'s limit at contact (1e-7 of the reach)."""
-    return np.concatenate([reach * np.geomspace(1e-7, 0.02, _GRID // 4, endpoint=False),
-                           reach * np.linspace(0.02, 1.0, _GRID - _GRID // 4)])
+    travel, then uniform; the first point is F̄'s limit at contact (1e-7 of the reach).
+    ``reach`` may be traced (a fit's compiled residuals): the grid is a fixed shape × reach."""
+    unit = np.concatenate([np.geomspace(1e-7, 0.02, _GRID // 4, endpoint=False), np.linspace(0.02, 1.0, _GRID - _GRID // 4)])
+    return reach * jnp.asarray(unit)
 
 
-def _integral(grid: np.ndarray, values, x):
+def _integral(grid, values, x):
     """∫₀^x of the piecewise-linear interpolant of ``values`` on ``grid`` (increasing; the
     interpolant is continued flat from grid[0] to 0), exact; x clipped to [0, grid[-1]]."""
-    h = np.diff(grid)
+    grid = jnp.asarray(grid)
+    h = jnp.diff(grid)
     cumulative = jnp.concatenate([jnp.zeros(1), jnp.cumsum(0.5 * (values[1:] + values[:-1]) * h)])
     x = jnp.clip(x, 0.0, grid[-1])
-    k = jnp.clip(jnp.searchsorted(jnp.asarray(grid), x, side="right") - 1, 0, grid.size - 2)
-    t = jnp.maximum(x - jnp.asarray(grid)[k], 0.0)
-    slope = (values[k + 1] - values[k]) / jnp.asarray(h)[k]
+    k = jnp.clip(jnp.searchsorted(grid, x, side="right") - 1, 0, grid.shape[0] - 2)
+    t = jnp.maximum(x - grid[k], 0.0)
+    slope = (values[k + 1] - values[k]) / h[k]
     head = values[0] * jnp.minimum(x, grid[0])  # [0, grid[0]]: F̄(0⁺)
     return head + cumulative[k] + values[k] * t + 0.5 * slope * t**2

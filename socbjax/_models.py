@@ -31,6 +31,8 @@ them and is passed to :func:`socbjax.compress` (``model.network`` then carries n
 
 from __future__ import annotations
 
+import functools
+
 import jax.numpy as jnp
 import numpy as np
 
@@ -184,7 +186,9 @@ FIT_MODELS = {"column": ColumnModel, "unit-mesh": UnitMeshModel, "outcrop": Outc
 
 
 def make_fit_model(model, **options) -> FitModel:
-    """A :class:`FitModel` from a name in ``FIT_MODELS`` (with builder ``options``) or itself."""
+    """A :class:`FitModel` from a name in ``FIT_MODELS`` (with builder ``options``) or itself.
+    A name with the same (hashable) options returns the same object: built-in models are not
+    changed after construction, and sharing them lets fits reuse their compiled programs."""
     if isinstance(model, FitModel):
         if options:
             raise ValueError("model options apply to built-in model names only")
@@ -196,10 +200,27 @@ def make_fit_model(model, **options) -> FitModel:
     if unknown:
         raise ValueError(f"unknown option(s) {', '.join(map(repr, unknown))} for the {model} model; it takes "
                          f"{', '.join(known)}")
+    key = (model, tuple(sorted(options.items())))
     try:
-        return FIT_MODELS[model](**options)
+        hash(key)
+    except TypeError:  # e.g. a list option: built afresh
+        return _built_model(model, key[1])
+    return _shared_model(key)
+
+
+def _built_model(name: str, options: tuple) -> FitModel:
+    try:
+        return FIT_MODELS[name](**dict(options))
     except TypeError as err:
-        raise ValueError(f"invalid option for the {model} model: {err}") from None
+        raise ValueError(f"invalid option for the {name} model: {err}") from None
+
+
+# A built-in model by name and options is built once and shared (models are not changed after
+# construction): a fit's compiled program is keyed on the model object, so repeated
+# ``fit(curve, "unit-mesh")`` calls compile once, and a lawn's outcrops grow once.
+@functools.lru_cache(maxsize=16)
+def _shared_model(key: tuple) -> FitModel:
+    return _built_model(*key)
 
 
 def builder_options(model: str) -> list[str]:

@@ -23,7 +23,20 @@ import numpy as np
 
 from ._checks import check_real
 
-__all__ = ["Parameter", "NUISANCE_PARAMETERS"]
+__all__ = ["Parameter", "NUISANCE_PARAMETERS", "bounded_value"]
+
+
+def bounded_value(z, lower, upper):
+    """The value of unconstrained z (jax or float) inside the open bounds ``lower``,
+    ``upper`` (numbers or arrays, e.g. traced in a compiled fit; None: unbounded side), by
+    the transforms of the module docstring."""
+    if lower is not None and upper is not None:
+        return lower + (upper - lower) * jax.nn.sigmoid(z)
+    if lower is not None:
+        return lower + jnp.exp(z)
+    if upper is not None:
+        return upper - jnp.exp(-z)
+    return z
 
 
 @dataclasses.dataclass(frozen=True)
@@ -79,14 +92,7 @@ class Parameter:
 
     def to_value(self, z):
         """Unconstrained z (jax or float) -> value."""
-        lo, hi = self.lower, self.upper
-        if lo is not None and hi is not None:
-            return lo + (hi - lo) * jax.nn.sigmoid(z)
-        if lo is not None:
-            return lo + jnp.exp(z)
-        if hi is not None:
-            return hi - jnp.exp(-z)
-        return z
+        return bounded_value(z, self.lower, self.upper)
 
     def to_z(self, value: float) -> float:
         """Value -> unconstrained z (host side)."""

@@ -4,6 +4,7 @@ JAX's public trace event (jax.monitoring; a cache hit does not trace, so it does
 import jax
 import jax.numpy as jnp
 import numpy as np
+import pytest
 
 import socbjax as sj
 
@@ -57,6 +58,24 @@ def test_sampled_compress_at_new_depths_and_samples_does_not_retrace(traces):
     sj.compress(net.replace(EI=net.EI * 2), 0.3, at=[0.1, 0.2, 0.3])
     assert first > 0 and len(traces) == first, traces[first:]
     np.testing.assert_allclose(again, first_force, rtol=1e-9)
+
+
+def test_a_fit_of_a_new_curve_runs_the_first_fits_program(traces):
+    """sj.fit compiles its residuals and Jacobian once for a model, free names and data size:
+    the next curve (another EI, depth and contact start, so other points touch) adds no
+    trace.  Noise-free curves: each fit recovers its own EI."""
+    model = sj.ColumnModel(3, supports=("pinned", "pinned"), dim=2)
+    curves = []
+    for EI, c in ((0.071, np.linspace(0.02, 0.2, 10)), (0.15, np.linspace(-0.02, 0.25, 10))):
+        u = np.maximum(c, 1e-6)
+        F = np.asarray(sj.compress(model.network({"EI": EI}), float(u.max()), at=u).force)
+        curves.append((EI, c, np.where(c > 0, F, 0.0)))
+    fitted = [sj.fit((curves[0][1], curves[0][2]), model, free="EI", initial={"EI": 0.05})]
+    first = len(traces)
+    fitted.append(sj.fit((curves[1][1], curves[1][2]), model, free="EI", initial={"EI": 0.05}))
+    assert first > 0 and len(traces) == first, traces[first:]
+    for (EI, _, _), result in zip(curves, fitted, strict=True):
+        assert result.converged and result.values["EI"] == pytest.approx(EI, rel=1e-6), result.summary()
 
 
 def test_jitted_user_function_of_a_network_traces_once(traces):
