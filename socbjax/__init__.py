@@ -13,6 +13,10 @@ entry point is a function of traced values (``jax.jit``, ``jax.grad``, ``jax.jac
 The import itself is light (it does not import JAX): the public names are loaded, with JAX,
 on first use (PEP 562 ``__getattr__``; they live in ``socbjax._api``), so the command line
 answers ``--help`` and argument errors at once.
+
+The import also adds ``--xla_cpu_use_fusion_emitters=false`` to ``XLA_FLAGS`` (about half
+the compile time of the first call on CPU, the same run time): see ``socbjax._xla_flags``;
+``SOCBJAX_XLA_DEFAULTS=off`` opts out.
 """
 
 import os as _os
@@ -24,6 +28,9 @@ else:  # JAX reads JAX_ENABLE_X64 when it is imported (jax/_src/config.py); _api
     _os.environ["JAX_ENABLE_X64"] = "1"
 
 from ._version import __version__  # noqa: E402
+from ._xla_flags import add_default_xla_flags as _add_default_xla_flags  # noqa: E402
+
+_add_default_xla_flags()  # faster XLA compilation on CPU; SOCBJAX_XLA_DEFAULTS=off opts out
 
 __all__ = [
     "__version__",
@@ -54,6 +61,7 @@ __all__ = [
     # files, figures, tooling
     "save", "load", "save_checkpoint", "load_checkpoint", "check_output_path", "output_lock", "atomic_path", "save_figures", "plot_force_curve", "plot_snapshots",
     "plot_end_forces", "plot_strand_forces", "plot_fit", "plot_lawn", "save_fit_figure", "enable_compilation_cache",
+    "add_default_xla_flags",
 ]
 
 _SUBMODULES = ("testing", "cli")  # ``socbjax.testing`` works without importing it first

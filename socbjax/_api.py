@@ -17,6 +17,7 @@ from ._curve_inputs import check_dimension, collect_curve_files, read_curve  # n
 from ._buckling import buckling_load  # noqa: E402
 from ._builders import SUPPORTS, arc, cantilever, column, crimped_fibre, helix  # noqa: E402
 from ._cache import enable_compilation_cache  # noqa: E402
+from ._xla_flags import add_default_xla_flags  # noqa: E402
 from ._compare import ModelComparison, compare_models  # noqa: E402
 from ._compress import compress  # noqa: E402
 from ._contact import Contact, Plane, Sphere  # noqa: E402

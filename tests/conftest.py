@@ -4,7 +4,8 @@ enables it on import).
 Compilation dominates the suite's time, so the session (and the subprocesses it starts,
 which inherit the environment) compiles with XLA's backend optimisation level 0 (about a third less compile time) and
 without LLVM's expensive passes (a further ~7 %), the same arithmetic (set ``SOCBJAX_TEST_XLA_FLAGS`` to override,
-e.g. to an empty string) — and uses JAX's persistent compilation cache in
+e.g. to an empty string); importing socbjax adds its own default, the legacy CPU fusion emitters
+(``socbjax._xla_flags``: a further third off the compile time of the 3D tests) — and uses JAX's persistent compilation cache in
 ``.jax_cache/`` at the repository root (``SOCBJAX_CACHE_DIR`` overrides; ``off`` disables),
 so a second run does not recompile.
 """
