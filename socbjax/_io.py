@@ -2,7 +2,8 @@
 checkpoints of long runs (:func:`save_checkpoint` / :func:`load_checkpoint`), atomic writes
 (:func:`atomic_path`), output checks (:func:`check_output_path`) and :func:`output_lock`.
 
-Layout of a result file (``format = "socbjax.compression"``, ``format_version = 3``)::
+Layout of a result file (``format = "socbjax.compression"``, ``format_version = 6``; 6 added
+the per-step support reactions ``/path/reactions``)::
 
     /                 attrs: format, format_version, socbjax_version, created (UTC, ISO 8601),
                              result (name of a socbjax.RESULTS item; format 1: integer
@@ -102,6 +103,7 @@ UNITS = {
     "contact_force": "pN",
     "contact_points": "µm",
     "contact_forces": "pN",
+    "reactions": "pN",
     "limit_points/displacement": "µm",
     "limit_points/force": "pN",
     "network/positions": "µm",

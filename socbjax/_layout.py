@@ -33,10 +33,10 @@ from ._version import __version__
 __all__ = ["CHECKPOINT_FORMAT", "FORMAT_VERSION", "MAX_MAGNITUDE", "PATH_FIELDS", "RESULT_FORMAT", "limit_point_kind",
            "open_file", "read_checkpoint", "read_result"]
 
-# 5: contact outputs (count, min gap, force, slot points and forces); 4: the path's frame
+# 6: per-step support reactions; 5: contact outputs (count, min gap, force, slot points and forces); 4: the path's frame
 # angles (twists); 3: natural curvature, GJ and twisting; 2: result name (RESULTS), couples,
-# topology; 1 to 4 still readable
-FORMAT_VERSION = 5
+# topology; 1 to 5 still readable
+FORMAT_VERSION = 6
 RESULT_FORMAT = "socbjax.compression"
 CHECKPOINT_FORMAT = "socbjax.checkpoint"
 # Limit-point kinds are open-ended (force_maximum, fold, surface_crossing, ...): any identifier
@@ -49,7 +49,7 @@ _PATH_LAYOUT = {
     "phase": ("iu", "K"), "positions": ("f", "KNd"), "tangents": ("f", "KNd"), "moments": ("f", "KNm"),
     "segment_forces": ("f", "KSd"), "twists": ("f", "Kw"), "end_nodes": ("iu", "E"), "end_forces": ("f", "KE"),
     "iterations": ("iu", "K"), "contact_count": ("iu", "K"), "min_gap": ("f", "K"), "contact_force": ("f", "K"),
-    "contact_points": ("f", "Kcd"), "contact_forces": ("f", "Kcd"),
+    "contact_points": ("f", "Kcd"), "contact_forces": ("f", "Kcd"), "reactions": ("f", "KNd"),
 }
 _CONTACT_FIELDS = ("contact_count", "min_gap", "contact_force", "contact_points", "contact_forces")  # format 5
 PATH_FIELDS = tuple(_PATH_LAYOUT)
@@ -190,12 +190,14 @@ def _read_network(reader: Reader, version: int) -> tuple[Network, _Sizes]:
 def _read_path(reader: Reader, sizes: _Sizes, version: int) -> dict[str, np.ndarray]:
     if "path" not in reader.datasets:
         raise InvalidFile("the group /path is missing")
-    optional = (("twists",) if version < 4 else ()) + (_CONTACT_FIELDS if version < 5 else ())
+    optional = ((("twists",) if version < 4 else ()) + (_CONTACT_FIELDS if version < 5 else ())
+                + (("reactions",) if version < 6 else ()))
     arrays = _read_group(reader, sizes, "path", _PATH_LAYOUT, optional)
     K = arrays["displacement"].shape[0]
     if "twists" not in arrays:  # before format 4: not recorded (CompressionResult.solution says so)
         arrays["twists"] = np.zeros((K, 0))
-    # before format 5 the contact outputs are absent: CompressionResult fills "no contact"
+    # before format 5 the contact outputs are absent: CompressionResult fills "no contact";
+    # before format 6 the reactions: NaN (not recorded)
     if arrays["displacement"].shape[0] == 0:
         raise InvalidFile("/path has no steps (K = 0); a result holds at least its start")
     _check_range("/path/phase", arrays["phase"], len(PHASES), f"phases {dict(enumerate(PHASES))}")

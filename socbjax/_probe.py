@@ -18,7 +18,7 @@ from ._network import Network, add_direction, is_traced
 from ._path import state_unravel
 from ._path_settings import PROBE_PATH, PathSettings
 from ._perturbation import default_perturbation, perturbation_pattern, perturbation_plan, strand_segments
-from ._residual import Control, routed_nodal_force, state_tangents
+from ._residual import Control, net_nodal_force, routed_nodal_force, state_tangents
 from ._result import PHASES, CompressionResult, LimitPoint
 from ._solution import RESULTS, result_name
 
@@ -225,7 +225,8 @@ def observe(model, X, loads, U=None):
     every node, the material-frame angles ψ [N] (rad) of a twisting network ([0] otherwise),
     and the contact outputs: count, minimum gap (µm; NaN without obstacles), total contact
     force (pN, the sum of the magnitudes), contact points [c, d] (µm) and forces [c, d] (pN)
-    of the c = S·C slots (zero force: not in contact)."""
+    of the c = S·C slots (zero force: not in contact); last, the support reactions [N, d] (pN,
+    the force each support exerts on its node; zero at free nodes)."""
     net = model.network
     unravel = state_unravel(model)
     U = jnp.zeros(X.shape[0]) if U is None else jnp.asarray(U)
@@ -236,12 +237,14 @@ def observe(model, X, loads, U=None):
         st = unravel(x)
         twists = getattr(st, "twists", jnp.zeros(0))  # the jointed baseline has no frame angles
         if contact is None:
+            imbalance = net_nodal_force(st.forces, net, loads)
             axial = routed_nodal_force(st.forces, net, loads) @ axis
             empty = jnp.zeros((0, net.dim))
             outputs = (jnp.zeros((), jnp.int32), jnp.asarray(jnp.nan), jnp.zeros(()), empty, empty)
             probe = jnp.sum(jnp.where(net.probe, axial, 0.0))
         else:  # one evaluation of the contact kernel gives the slots and the segments' end forces
             points, gaps, F, counted, end_forces, extra = model.contact_geometry(st, Control.make(1.0, u))
+            imbalance = net_nodal_force(st.forces, net, loads + extra, end_forces)
             axial = routed_nodal_force(st.forces, net, loads + extra, end_forces) @ axis
             probe = jnp.sum(jnp.where(net.probe, axial, 0.0))
             # the law's force is on (and not handed over to a neighbouring segment's slot)
@@ -253,8 +256,9 @@ def observe(model, X, loads, U=None):
                 probe = probe + jnp.sum(jnp.where(contact.moving[None, :] > 0, face, 0.0))
             lowest = jnp.min(jnp.where(counted, gaps, jnp.inf)) if gaps.size else jnp.asarray(jnp.nan)
             outputs = (jnp.sum(touching).astype(jnp.int32), lowest, jnp.sum(jnp.linalg.norm(F, axis=-1)), points, F)
+        reactions = jnp.einsum("nij,nj->ni", jnp.asarray(net.position_projector), imbalance)  # as Solution.reactions
         return (st.positions, state_tangents(st.directors, net.dim), st.moments, st.forces, probe, -axial, twists,
-                *outputs)
+                *outputs, reactions)
 
     return jax.vmap(one)(X, U)
 
@@ -319,7 +323,7 @@ def package_path(model, rec, extra, result, settings, u_max, unload, parameters)
     capacity = settings.max_steps * (3 if unload else 2) + 1  # settle point + every phase's buffer
     observed = observe_rows(model, rec["X"], capacity, np.asarray(rec["U"]))
     positions, tangents, moments, forces, probe_force, axial, twists = observed[:7]
-    count, min_gap, contact_force, contact_points, contact_forces = observed[7:]
+    count, min_gap, contact_force, contact_points, contact_forces, reactions = observed[7:]
     ends = end_nodes(net)
     sign_ref = extra.get("sign_ref", rec["SIGN"][0])
     params = {"displacement_um": u_max, "unload": bool(unload), "method": settings.method, "sampled": False,
@@ -343,7 +347,7 @@ def package_path(model, rec, extra, result, settings, u_max, unload, parameters)
         stable=rec["SIGN"] == sign_ref, phase=rec["PHASE"].astype(np.int8), positions=positions, tangents=tangents,
         moments=moments, segment_forces=forces, twists=twists, end_nodes=ends, end_forces=axial[:, ends],
         iterations=rec["ITER"].astype(np.int32), contact_count=count, min_gap=min_gap, contact_force=contact_force,
-        contact_points=contact_points, contact_forces=contact_forces, result=result, network=net,
+        contact_points=contact_points, contact_forces=contact_forces, reactions=reactions, result=result, network=net,
         limit_points=events, parameters_json=parameters_json(params),
     )
 

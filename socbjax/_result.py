@@ -76,6 +76,10 @@ class CompressionResult(eqx.Module):
     contact_force : [K] sum of the contact force magnitudes (pN; 0 without contact).
     contact_points, contact_forces : [K, c, d] the c = S·C contact slots' points (µm) and
         forces on the filament (pN; zero where not in contact); c = 0 without contact.
+    reactions : [K, N, d] the force each support exerts on its node (pN; zero at free nodes;
+        the probe nodes' along the compression axis make up ``force`` with the probe face's
+        contacts), as :attr:`socbjax.Solution.reactions` per step: with the loads and the
+        contact forces they balance every filament.  NaN in files written before format 6.
     result : :class:`socbjax.RESULTS` item of the whole protocol (successful: every phase
         completed and, when sampled, every sample converged).
     network : the compressed network, its ``loads`` the applied ones (perturbation included).
@@ -103,6 +107,7 @@ class CompressionResult(eqx.Module):
     contact_force: Array | None = None
     contact_points: Array | None = None
     contact_forces: Array | None = None
+    reactions: Array | None = None
     limit_points: tuple = eqx.field(static=True, default=())
     parameters_json: str = eqx.field(static=True, default="{}")
 
@@ -113,6 +118,9 @@ class CompressionResult(eqx.Module):
             K, d = np.shape(self.displacement)[0], self.network.dim
             self.contact_count, self.min_gap = np.zeros(K, np.int32), np.full(K, np.nan)
             self.contact_force, self.contact_points, self.contact_forces = np.zeros(K), np.zeros((K, 0, d)), np.zeros((K, 0, d))
+        if self.reactions is None:  # not recorded (a file before format 6, a result built by hand)
+            K, N, d = np.shape(self.displacement)[0], self.network.n_nodes, self.network.dim
+            self.reactions = np.full((K, N, d), np.nan)
 
     @property
     def parameters(self) -> dict[str, Any]:

@@ -203,7 +203,7 @@ def compress_at(model, displacement, at=None, *, unload=False, perturbation=None
     U, X, iterations, converged, stable, result, observed, u0 = _sampled(loaded, jnp.asarray(displacement, jnp.float64), at,
                                                                         bool(unload), settings.traced(), inner)
     positions, tangents, moments, forces, probe_force, axial, twists = observed[:7]
-    count, min_gap, contact_force, contact_points, contact_forces = observed[7:]
+    count, min_gap, contact_force, contact_points, contact_forces, reactions = observed[7:]
     crossed = jnp.any(surface_crossing(net, positions, U) & converged)
     if crossing_exempt(model):
         crossed = jnp.asarray(False)
@@ -223,7 +223,7 @@ def compress_at(model, displacement, at=None, *, unload=False, perturbation=None
         phase=np.repeat(np.array([1, 2], np.int8)[: 2 if unload else 1], M), positions=positions, tangents=tangents,
         moments=moments, segment_forces=forces, twists=twists, end_nodes=ends, end_forces=axial[:, ends],
         iterations=iterations, contact_count=count, min_gap=min_gap, contact_force=contact_force,
-        contact_points=contact_points, contact_forces=contact_forces,
+        contact_points=contact_points, contact_forces=contact_forces, reactions=reactions,
         result=result, network=loaded.network, limit_points=(), parameters_json=parameters_json(params))
     if not throw:
         return out

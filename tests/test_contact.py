@@ -183,9 +183,18 @@ def test_channel_column_departs_from_the_elastica_at_the_wall(tmp_path):
     assert after.any() and np.all(F[after] > np.interp(U[after], np.asarray(free.displacement), np.asarray(free.force)) + 1)
     assert np.all(np.asarray(res.contact_count)[after] >= 1)
     assert np.all(np.asarray(res.contact_count)[before] == 0) and np.all(np.asarray(res.contact_force)[before] == 0)
+    # every step: the support reactions, the walls' forces and the loads balance the column
+    # (the walls' lateral push is carried by the two pinned ends), and the probe's reaction
+    # along the compression axis is the probe force
+    R, walls_on_column = np.asarray(res.reactions), np.asarray(res.contact_forces)
+    total = R.sum(axis=1) + walls_on_column.sum(axis=1) + np.asarray(res.network.loads).sum(axis=0)
+    np.testing.assert_allclose(total, 0.0, atol=1e-9 * F.max())
+    assert np.abs(walls_on_column[after].sum(axis=1)[:, 1]).min() > 1.0  # the walls push, sideways
+    probe, axis = np.asarray(res.network.probe), np.asarray(res.network.probe_direction)
+    np.testing.assert_allclose((R[:, probe] @ axis).sum(axis=1), F, rtol=1e-9, atol=1e-9 * F.max())
     # the contact outputs survive the file, and the figures mark the contacts and draw the walls
     back = sj.load(sj.save(res, tmp_path / "channel.h5"))
-    for name in ("contact_count", "min_gap", "contact_force", "contact_points", "contact_forces"):
+    for name in ("contact_count", "min_gap", "contact_force", "contact_points", "contact_forces", "reactions"):
         np.testing.assert_array_equal(np.asarray(getattr(back, name)), np.asarray(getattr(res, name)))
     assert back.parameters["contact"]["planes"][1]["normal"] == [0.0, -1.0]
     with pytest.raises(ValueError, match="contact slots"):

@@ -44,6 +44,7 @@ def make_result(dim=3, K=7, N=4, E=1, seed=0, twisting=True):
         end_nodes=np.arange(E, dtype=np.int32),
         end_forces=rng.normal(size=(K, E)),
         iterations=rng.integers(1, 9, size=K).astype(np.int32),
+        reactions=rng.normal(size=(K, N, dim)),
         limit_points=(
             LimitPoint("force_maximum", 3, 0.3, 1.25, "loading"),
             LimitPoint("bifurcation", 5, 0.5, -0.5, "unloading"),
@@ -100,7 +101,8 @@ def test_file_layout_units_and_stamps(tmp_path):
         # headers, out of HDF5's unchecksummed global heap.
         text = {name: f.attrs[name].decode() for name in ("format", "socbjax_version", "created", "result")}
         assert text["format"] == "socbjax.compression" and text["socbjax_version"] == sj.__version__
-        assert f.attrs["format_version"] == 5 and text["result"] == "max_steps"
+        assert f.attrs["format_version"] == 6 and text["result"] == "max_steps"
+        assert f["path/reactions"].shape == (7, 4, 3) and f["units"].attrs["reactions"].decode() == "pN"
         assert f["path/twists"].shape == (7, 4) and f["units"].attrs["twists"].decode() == "rad"
         assert f["units"].attrs["displacement"].decode() == "µm" and f["units"].attrs["moments"].decode() == "pN·µm"
         assert f["path/force"].attrs["units"].decode() == "pN"
@@ -191,7 +193,7 @@ def test_foreign_and_future_files_rejected(tmp_path):
     with pytest.raises(ValueError, match="socbjax.compression file"):
         sj.load_checkpoint(path)
     with h5py.File(path, "a") as f:
-        f.attrs["format_version"] = 6
+        f.attrs["format_version"] = 7
     with pytest.raises(ValueError, match="newer socbjax"):
         sj.load(path)
 
@@ -221,7 +223,7 @@ def test_checkpoint_round_trip_is_bitwise(tmp_path, rng):
         assert isinstance(got, np.ndarray) and got.dtype == value.dtype and got.shape == value.shape, name
         assert got.tobytes() == value.tobytes(), name
     with h5py.File(path, "r") as f:
-        assert f.attrs["format"].decode() == "socbjax.checkpoint" and f.attrs["format_version"] == 5
+        assert f.attrs["format"].decode() == "socbjax.checkpoint" and f.attrs["format_version"] == 6
     with pytest.raises(ValueError, match="socbjax.checkpoint file"):
         sj.load(path)
 
@@ -303,6 +305,23 @@ def test_reads_format_version_3_results_without_frame_angles(tmp_path):
         del f["path/twists"]
         f["path/twists"] = np.zeros((7, 3))
     with pytest.raises(ValueError, match=r"twists has shape \(7, 3\)"):
+        sj.load(path)
+
+
+def test_reads_format_version_5_results_without_reactions(tmp_path):
+    """Files before format 6 have no per-step support reactions: they load with NaN there (not
+    recorded), and a format-6 file without them is refused."""
+    result = make_result()
+    path = sj.save(result, tmp_path / "v5.h5")
+    with h5py.File(path, "a") as f:
+        del f["path/reactions"]
+        f.attrs["format_version"] = 5
+    back = sj.load(path)
+    assert back.reactions.shape == (7, 4, 3) and np.isnan(back.reactions).all()
+    np.testing.assert_array_equal(back.force, result.force)
+    with h5py.File(path, "a") as f:
+        f.attrs["format_version"] = 6
+    with pytest.raises(ValueError, match=r"reactions"):
         sj.load(path)
 
 
