@@ -35,7 +35,7 @@ import pytest  # noqa: E402
 
 # The longest files first: with one file per worker (--dist loadfile) a long file scheduled last
 # runs alone at the end while the other worker idles (measured: about a minute of the suite).
-LONGEST_FIRST = ("test_notebooks.py", "test_transformations.py", "test_lawn.py", "test_sampled.py", "test_compress.py",
+LONGEST_FIRST = ("test_contact.py", "test_notebooks.py", "test_transformations.py", "test_lawn.py", "test_sampled.py", "test_compress.py",
                  "test_fit_model.py", "test_batch.py", "test_compare.py")
 
 

@@ -144,7 +144,6 @@ def test_simulate_column_then_plot(tmp_path, capsys):
     assert all((tmp_path / "figs" / p).stat().st_size > 5_000 for p in pngs)
 
 
-@pytest.mark.slow  # about 60 s (a model with pair slots compiles); the library's contact tests are in the default suite
 def test_simulate_with_contact_records_the_obstacles_and_contact_outputs(tmp_path, capsys):
     out = tmp_path / "column.h5"
     argv = ["simulate", "column", "--dim", "2", "--nodes", "5", "--displacement", "0.2", "--contact", "--diameter", "0.01",

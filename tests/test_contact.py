@@ -101,7 +101,6 @@ def test_the_newton_step_limit_stops_a_gap_at_its_stated_depth():
     assert limit(3 * delta, 1000 * delta) == 0.01  # the floor
 
 
-@pytest.mark.slow  # 25–42 s in CI; the suite's 10-minute budget
 def test_newton_comes_out_of_a_deep_guess_in_a_few_steps():
     """A soft cantilever's free tip pressed lightly onto a wall (equilibrium depth 1 − g/δ of
     about 0.01–0.02), Newton started from the contact-free shape, whose tip lies 0.5 δ or
@@ -308,7 +307,6 @@ def test_the_nearer_end_rule_of_a_straight_segment_misses_little_depth():
             assert np.all(seen[clear] - near[clear] < 1e-3 * delta), height
 
 
-@pytest.mark.slow  # 38–44 s: the default suite ran 10 min 26 s with it (2026-12-06)
 def test_filament_on_a_stiff_filament_matches_the_same_filament_on_a_wall():
     """Filament–filament contact (pair slots, broad phase) against the validated wall
     contact: a stiff filament under a cantilever acts as a plane d/2 above its axis."""
@@ -322,7 +320,6 @@ def test_filament_on_a_stiff_filament_matches_the_same_filament_on_a_wall():
     np.testing.assert_allclose(np.asarray(pair.positions[tip]), np.asarray(plane.positions[-1]), atol=1e-6)
 
 
-@pytest.mark.slow
 def test_clamped_column_self_contact_follows_the_elastica_then_departs():
     """Clamped–clamped column (16 segments, d = 0.01 L): until its lobes touch, the gap
     between them is the elliptic-integral elastica's (zero-thickness touch at Δ/L = 0.8487);

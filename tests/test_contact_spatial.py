@@ -64,7 +64,6 @@ def test_node_lumped_3d_contact_is_much_worse_and_twist_changes_nothing(exact):
     assert np.abs(np.asarray(twisting.positions[-1]) - ref["tip"]).max() < 1e-6
 
 
-@pytest.mark.slow  # 56 s: the default suite ran 10 min 43 s with it (2026-12-06)
 def test_a_planar_contact_problem_in_any_plane_is_the_2d_solution():
     load2, center2 = TIP[:2], CENTER[:2]
     planar = sj.solve(sj.cantilever(5, dim=2), forces={-1: load2},
