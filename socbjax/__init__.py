@@ -14,8 +14,8 @@ The import itself is light (it does not import JAX): the public names are loaded
 on first use (PEP 562 ``__getattr__``; they live in ``socbjax._api``), so the command line
 answers ``--help`` and argument errors at once.
 
-The import also adds ``--xla_cpu_use_fusion_emitters=false`` to ``XLA_FLAGS`` (about half
-the compile time of the first call on CPU, the same run time): see ``socbjax._xla_flags``;
+The import also adds ``--xla_cpu_use_fusion_emitters=false`` to ``XLA_FLAGS`` (a quarter to
+a half less compile time of a first call on CPU, the same run time): see ``socbjax._xla_flags``;
 ``SOCBJAX_XLA_DEFAULTS=off`` opts out.
 """
 

@@ -3,8 +3,8 @@
 XLA compiles a program before its first run, and for socbjax's programs (a Newton solve or a
 whole continuation path, with the segment physics and its derivatives inlined) that is most
 of the wall time of a first call.  With jaxlib 0.10's default CPU fusion emitters it takes
-about twice as long as with the legacy ones (``--xla_cpu_use_fusion_emitters=false``), and
-the compiled programs run as fast.  Measured on 2 CPU cores, jaxlib 0.10.2, cold cache:
+about 1.3–1.8 times as long as with the legacy ones (``--xla_cpu_use_fusion_emitters=false``),
+and the compiled programs run as fast or faster.  Measured on 2 CPU cores, jaxlib 0.10.2, cold cache:
 
 * first ``sj.solve`` of a 5-node 3D cantilever: 4.75 s against 7.85 s (compile only);
 * first ``sj.compress`` of the 6-generation outcrop by 1 µm: 34.8 s against 43.7 s; the
