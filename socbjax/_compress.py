@@ -100,8 +100,8 @@ def compress(network: Network, displacement, *, at=None, unload: bool = False, m
     settings = compress_settings(settings, method, displacement)
     checkpoint = _checkpoint(checkpoint)
     model = SOCBModel(network, get_quadrature(settings.quadrature_order), contact_setup(network, contact))
-    if contact is not None:
-        parameters = {**(parameters or {}), "contact": contact.as_dict()}
+    if contact is not None:  # the obstacles' names, in slot order (CompressionResult.obstacle_forces)
+        parameters = {**(parameters or {}), "contact": {**contact.as_dict(), "obstacles": list(model.contact.names)}}
     if at is not None or is_traced(network, perturbation, displacement):
         if checkpoint is not None:
             raise ValueError("checkpoint applies to full paths; compress(..., at=...) is one traced computation")

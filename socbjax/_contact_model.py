@@ -26,9 +26,11 @@ ANCHOR_TOLERANCE = 1e-9
 
 
 def _obstacle_table(network: Network, contact: Contact):
-    """(kinds, points [C, d], normals [C, d], radii [C], moving [C], surface [C]) of every
-    obstacle; ``surface`` is 1 for the probe face and the substrate (placed through the
-    anchored tips and bases here; :func:`contact_setup` moves them back by d/2 + δ)."""
+    """(kinds, points [C, d], normals [C, d], radii [C], moving [C], surface [C], names) of
+    every obstacle; ``surface`` is 1 for the probe face and the substrate (placed through the
+    anchored tips and bases here; :func:`contact_setup` moves them back by d/2 + δ); names:
+    "probe face", "substrate", "plane i", "sphere i" (i: the index in ``contact.planes`` /
+    ``contact.obstacles``)."""
     d = network.dim
     kinds, points, normals, radii, moving = [], [], [], [], []
     if contact.surfaces and network.has_probe:
@@ -48,8 +50,10 @@ def _obstacle_table(network: Network, contact: Contact):
         moving.append(0.0)
     stack = lambda rows: jnp.reshape(jnp.asarray(rows, jnp.float64), (-1, d))  # noqa: E731
     surface = np.arange(len(kinds)) < n_faces
+    names = (("probe face", "substrate")[:n_faces] + tuple(f"plane {i}" for i in range(len(contact.planes)))
+             + tuple(f"sphere {i}" for i in range(len(contact.obstacles))))
     return (tuple(kinds), stack(points), stack(normals), jnp.asarray(radii, jnp.float64),
-            jnp.asarray(moving, jnp.float64), surface.astype(float))
+            jnp.asarray(moving, jnp.float64), surface.astype(float), names)
 
 
 def _segment_roles(network: Network) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -149,7 +153,7 @@ def contact_setup(network: Network, contact: Contact | None, *, dense: bool = Fa
         if obstacle.dim != network.dim:
             raise ValueError(f"contact obstacle {i} is {obstacle.dim}D but the network is {network.dim}D; give points "
                              f"and normals with {network.dim} components")
-    kinds, points, normals, radii, moving, surface = _obstacle_table(network, contact)
+    kinds, points, normals, radii, moving, surface, names = _obstacle_table(network, contact)
     free_base, smooth_start, smooth_end = _segment_roles(network)
     owns_start, owns_end, anchored = _ownership(network, kinds, points, normals, radii, free_base)
     # The probe face and the substrate lie d/2 + δ beyond the anchored tips and bases: an
@@ -167,7 +171,7 @@ def contact_setup(network: Network, contact: Contact | None, *, dense: bool = Fa
     S = network.n_segments
     capacity = (max(8, S) if contact.capacity is None else contact.capacity) if contact.self_contact else 0
     reach = jnp.maximum(0.25 * length, 20.0 * delta) if contact.reach is None else contact.reach
-    return ContactSetup(kinds=kinds, points=f(points), normals=f(normals), radii=f(radii), moving=f(moving),
+    return ContactSetup(kinds=kinds, names=names, points=f(points), normals=f(normals), radii=f(radii), moving=f(moving),
                         owns_start=f(slot_roles[0]), owns_end=f(slot_roles[1]), slot_smooth_start=f(slot_roles[2]),
                         slot_smooth_end=f(slot_roles[3]),
                         active=f(1.0 - jnp.maximum(exempt[seg[:, 0]], exempt[seg[:, 1]])), pinned=f(pinned),

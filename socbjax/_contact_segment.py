@@ -72,6 +72,7 @@ class ContactSetup(eqx.Module):
     :func:`socbjax._contact_model.contact_setup`).  C obstacles, S segments."""
 
     kinds: tuple = eqx.field(static=True)  # "plane" | "sphere" per obstacle
+    names: tuple = eqx.field(static=True)  # "probe face", "substrate", "plane i", "sphere i" per obstacle
     points: jax.Array  # [C, d] plane point or sphere center (µm), at zero probe displacement
     normals: jax.Array  # [C, d] plane unit normal (allowed side); zeros for spheres
     radii: jax.Array  # [C] sphere radius (µm); 0 for planes

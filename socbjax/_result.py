@@ -127,6 +127,23 @@ class CompressionResult(eqx.Module):
         return json.loads(self.parameters_json)
 
     @property
+    def obstacle_forces(self) -> np.ndarray:
+        """[K, C, d] the total force (pN) the filaments exert on each obstacle at each step, in
+        the order of ``parameters["contact"]["obstacles"]`` ("probe face", "substrate",
+        "plane i", "sphere i"): minus the sum of its slots' ``contact_forces``.  [K, 0, d]
+        without contact.  With the support ``reactions`` and the loads, the filaments balance:
+        Σ reactions + Σ loads = Σ obstacle forces (without filament–filament contact)."""
+        K, d, S = np.shape(self.displacement)[0], self.network.dim, self.network.n_segments
+        contact = self.parameters.get("contact")
+        if contact is None:
+            return np.zeros((K, 0, d))
+        if "obstacles" not in contact:
+            raise ValueError("this result was computed before socbjax recorded its obstacles' names "
+                             "(parameters['contact']['obstacles']); re-run the compression")
+        C = len(contact["obstacles"])
+        return -np.asarray(self.contact_forces)[:, : S * C].reshape(K, S, C, d).sum(axis=1)
+
+    @property
     def completed(self) -> bool:
         return bool(self.result == RESULTS.successful)
 

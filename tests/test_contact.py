@@ -185,15 +185,21 @@ def test_channel_column_departs_from_the_elastica_at_the_wall(tmp_path):
     # every step: the support reactions, the walls' forces and the loads balance the column
     # (the walls' lateral push is carried by the two pinned ends), and the probe's reaction
     # along the compression axis is the probe force
-    R, walls_on_column = np.asarray(res.reactions), np.asarray(res.contact_forces)
-    total = R.sum(axis=1) + walls_on_column.sum(axis=1) + np.asarray(res.network.loads).sum(axis=0)
-    np.testing.assert_allclose(total, 0.0, atol=1e-9 * F.max())
-    assert np.abs(walls_on_column[after].sum(axis=1)[:, 1]).min() > 1.0  # the walls push, sideways
+    R, on_walls = np.asarray(res.reactions), res.obstacle_forces
+    assert res.parameters["contact"]["obstacles"] == ["plane 0", "plane 1"] and on_walls.shape == (len(U), 2, 2)
+    np.testing.assert_allclose(R.sum(axis=1) + np.asarray(res.network.loads).sum(axis=0), on_walls.sum(axis=1),
+                               atol=1e-9 * F.max())
+    assert np.abs(on_walls[after].sum(axis=1)[:, 1]).min() > 1.0  # the walls are pushed, sideways
+    normals = np.array([[0.0, 1.0], [0.0, -1.0]])
+    along = np.einsum("kcd,cd->kc", on_walls, normals)
+    assert np.all(along <= 1e-12)  # each wall pushed into itself, never pulled
+    np.testing.assert_allclose(on_walls, along[..., None] * normals, atol=1e-9 * F.max())  # frictionless: normal only
     probe, axis = np.asarray(res.network.probe), np.asarray(res.network.probe_direction)
     np.testing.assert_allclose((R[:, probe] @ axis).sum(axis=1), F, rtol=1e-9, atol=1e-9 * F.max())
     # the contact outputs survive the file, and the figures mark the contacts and draw the walls
     back = sj.load(sj.save(res, tmp_path / "channel.h5"))
-    for name in ("contact_count", "min_gap", "contact_force", "contact_points", "contact_forces", "reactions"):
+    for name in ("contact_count", "min_gap", "contact_force", "contact_points", "contact_forces", "reactions",
+                 "obstacle_forces"):
         np.testing.assert_array_equal(np.asarray(getattr(back, name)), np.asarray(getattr(res, name)))
     assert back.parameters["contact"]["planes"][1]["normal"] == [0.0, -1.0]
     with pytest.raises(ValueError, match="contact slots"):
