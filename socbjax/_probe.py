@@ -18,7 +18,7 @@ from ._network import Network, add_direction, is_traced
 from ._path import state_unravel
 from ._path_settings import PROBE_PATH, PathSettings
 from ._perturbation import default_perturbation, perturbation_pattern, perturbation_plan, strand_segments
-from ._residual import Control, net_nodal_force, routed_nodal_force, state_tangents
+from ._residual import Control, net_nodal_force, route_to_mothers, state_tangents, support_reactions
 from ._result import PHASES, CompressionResult, LimitPoint
 from ._solution import RESULTS, result_name
 
@@ -236,29 +236,27 @@ def observe(model, X, loads, U=None):
     def one(x, u):
         st = unravel(x)
         twists = getattr(st, "twists", jnp.zeros(0))  # the jointed baseline has no frame angles
+        face = jnp.zeros(())  # the probe face's contact forces along the axis
         if contact is None:
             imbalance = net_nodal_force(st.forces, net, loads)
-            axial = routed_nodal_force(st.forces, net, loads) @ axis
             empty = jnp.zeros((0, net.dim))
             outputs = (jnp.zeros((), jnp.int32), jnp.asarray(jnp.nan), jnp.zeros(()), empty, empty)
-            probe = jnp.sum(jnp.where(net.probe, axial, 0.0))
         else:  # one evaluation of the contact kernel gives the slots and the segments' end forces
             points, gaps, F, counted, end_forces, extra = model.contact_geometry(st, Control.make(1.0, u))
             imbalance = net_nodal_force(st.forces, net, loads + extra, end_forces)
-            axial = routed_nodal_force(st.forces, net, loads + extra, end_forces) @ axis
-            probe = jnp.sum(jnp.where(net.probe, axial, 0.0))
             # the law's force is on (and not handed over to a neighbouring segment's slot)
             touching = counted & (gaps < contact.activation) & (jnp.linalg.norm(F, axis=-1) > 1e-9 * contact.force_scale)
             F = jnp.where(touching[..., None], F, 0.0)  # not round-off of a zero force
             C = model.n_obstacles
             if C:
-                face = F[: net.n_segments * C].reshape(net.n_segments, C, -1) @ axis
-                probe = probe + jnp.sum(jnp.where(contact.moving[None, :] > 0, face, 0.0))
+                on_slots = F[: net.n_segments * C].reshape(net.n_segments, C, -1) @ axis
+                face = jnp.sum(jnp.where(contact.moving[None, :] > 0, on_slots, 0.0))
             lowest = jnp.min(jnp.where(counted, gaps, jnp.inf)) if gaps.size else jnp.asarray(jnp.nan)
             outputs = (jnp.sum(touching).astype(jnp.int32), lowest, jnp.sum(jnp.linalg.norm(F, axis=-1)), points, F)
-        reactions = jnp.einsum("nij,nj->ni", jnp.asarray(net.position_projector), imbalance)  # as Solution.reactions
+        axial = route_to_mothers(imbalance, net) @ axis
+        probe = jnp.sum(jnp.where(net.probe, axial, 0.0)) + face
         return (st.positions, state_tangents(st.directors, net.dim), st.moments, st.forces, probe, -axial, twists,
-                *outputs, reactions)
+                *outputs, support_reactions(imbalance, net))
 
     return jax.vmap(one)(X, U)
 

@@ -61,6 +61,8 @@ __all__ = [
     "socb_residual",
     "net_nodal_force",
     "routed_nodal_force",
+    "route_to_mothers",
+    "support_reactions",
     "reference_scales",
     "support_rows",
     "socb_structure",
@@ -128,11 +130,22 @@ def net_nodal_force(forces: Float[Array, "S d"], network: Network, loads: Float[
     return ending - starting - loads
 
 
-def routed_nodal_force(forces, network: Network, loads, end_forces=None) -> Float[Array, "N d"]:
-    """:func:`net_nodal_force` with each daughter base's share moved to its mother node, so
-    that a junction balances all three segment ends at once (zero at daughter bases)."""
-    imbalance = net_nodal_force(forces, network, loads, end_forces)
+def route_to_mothers(imbalance: Float[Array, "N d"], network: Network) -> Float[Array, "N d"]:
+    """A nodal ``imbalance`` (:func:`net_nodal_force`) with each daughter base's share moved
+    to its mother node, so that a junction balances all three segment ends at once (zero at
+    daughter bases)."""
     return jax.ops.segment_sum(imbalance, network.attach, num_segments=network.n_nodes)
+
+
+def routed_nodal_force(forces, network: Network, loads, end_forces=None) -> Float[Array, "N d"]:
+    """:func:`net_nodal_force` routed to the mother nodes (:func:`route_to_mothers`)."""
+    return route_to_mothers(net_nodal_force(forces, network, loads, end_forces), network)
+
+
+def support_reactions(imbalance: Float[Array, "N d"], network: Network) -> Float[Array, "N d"]:
+    """[N, d] the force each support exerts on its node (pN): the nodal ``imbalance``
+    (:func:`net_nodal_force`) in the node's supported directions, zero at free nodes."""
+    return jnp.einsum("nij,nj->ni", jnp.asarray(network.position_projector), imbalance)
 
 
 def support_rows(state_positions, imbalance, network: Network, control: Control | None = None):

@@ -19,7 +19,7 @@ from jaxtyping import Array
 
 from ._equilibrium import Solution, node_angles_and_curvatures
 from ._network import Network
-from ._residual import SOCBState, net_nodal_force
+from ._residual import SOCBState, net_nodal_force, support_reactions
 from ._solution import RESULTS, result_message
 
 __all__ = ["CompressionResult", "LimitPoint", "PHASES"]
@@ -197,7 +197,7 @@ class CompressionResult(eqx.Module):
         positions, tangents, moments, forces = (self.positions[i], self.tangents[i], self.moments[i], self.segment_forces[i])
         angles, curvatures = node_angles_and_curvatures(net, tangents, moments)
         directors = angles if net.dim == 2 else tangents
-        reactions = jnp.einsum("nij,nj->ni", jnp.asarray(net.position_projector), net_nodal_force(forces, net, net.loads))
+        reactions = support_reactions(net_nodal_force(forces, net, net.loads), net)
         row = RESULTS.where(jnp.asarray(self.converged)[i], RESULTS.successful, RESULTS.not_reached)
         twists = self.twists[i] if net.twisting else jnp.zeros(0)
         state = SOCBState(positions=positions, directors=directors, moments=moments, forces=forces, twists=twists,

@@ -31,7 +31,7 @@ from ._network import Network, is_traced
 from ._path import NoRecorder, PathProblem, follow_path, position_weights, start_path, state_template
 from ._path_settings import LOAD_RAMP, MAX_QUADRATURE_ORDER, PathSettings
 from ._quadrature import get_quadrature
-from ._residual import Control, SOCBModel, net_nodal_force
+from ._residual import Control, SOCBModel, net_nodal_force, support_reactions
 from ._solution import RESULTS, ConvergenceError, result_message
 from ._sparsity import linear_solver_for
 
@@ -169,8 +169,8 @@ def _package(model, x, stats, state0) -> Solution:
     if net.dim == 2 and isinstance(model, SOCBModel):
         angles = state.directors  # the unknowns themselves: unwrapped beyond ±π where the filament turns
     end_forces, contact_loads = model.contact_ends(state) if isinstance(model, SOCBModel) else (None, 0.0)
-    reactions = net_nodal_force(state.forces, net, load_factor * net.loads + contact_loads, end_forces)  # support force
-    reactions = jnp.einsum("nij,nj->ni", jnp.asarray(net.position_projector), reactions)
+    reactions = support_reactions(net_nodal_force(state.forces, net, load_factor * net.loads + contact_loads, end_forces),
+                                  net)
     return Solution(positions=state.positions, tangents=tangents, angles=angles, moments=moments, curvatures=curvatures,
                     segment_forces=state.forces, reactions=reactions, result=result, iterations=iterations, steps=steps,
                     cutbacks=cutbacks, residual_norm=residual_norm, load_factor=load_factor, state=state, network=net,
