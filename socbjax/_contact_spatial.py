@@ -32,7 +32,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from ._contact_segment import ContactSetup, contact_slot_rows, corrected_quintic, jump_corrections, rest_sigma
-from ._geometry import sphere_exp, sphere_exp_differential_inverse
+from ._geometry import powers_of, sphere_exp, sphere_exp_differential_inverse
 from ._quadrature import HERMITE_TO_MONOMIAL
 from ._segment import chart_data, end_jet, kirchhoff_jet, twist_rows
 
@@ -84,8 +84,7 @@ def _g_derivatives(q):
     small = q < _SERIES_Q
     qs = jnp.where(small, q, 0.0)  # double where: each branch sees only its own safe values
     ql = jnp.where(small, 1.0, q)
-    powers = jnp.cumprod(jnp.concatenate([jnp.ones(1), jnp.full(_G_TERMS - 1, qs)]))  # q^m (no 0^0 in derivatives)
-    series = jnp.asarray(_G_SERIES) @ powers
+    series = jnp.asarray(_G_SERIES) @ powers_of(qs, _G_TERMS)  # q^m by products: no 0^0 in derivatives
     r = jnp.sqrt(ql)
     rec = [jnp.arctan2(r, 1.0) / r]
     for i in range(5):

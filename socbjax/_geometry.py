@@ -17,6 +17,7 @@ import jax.numpy as jnp
 from jaxtyping import Array, Float
 
 __all__ = [
+    "powers_of",
     "sphere_log",
     "sphere_log_jet",
     "sphere_exp",
@@ -44,7 +45,7 @@ _H = (
 )
 
 
-def _powers(q: Array, n: int) -> Array:
+def powers_of(q: Array, n: int) -> Array:
     """[..., n] the powers q⁰ … q^(n−1), by log₂ n products of doubling blocks.  Not Horner's
     n dependent steps: these series are inlined into every residual, Jacobian and line search
     of a 3D solve, and Horner's unrolled steps were a quarter of its compiled program."""
@@ -56,8 +57,8 @@ def _powers(q: Array, n: int) -> Array:
 
 
 def _series(coeffs: tuple[float, ...], q: Array, powers: Array | None = None) -> Array:
-    """Σ_k coeffs[k] q^k (``powers`` from :func:`_powers`, at least len(coeffs) of them)."""
-    powers = _powers(q, len(coeffs)) if powers is None else powers[..., : len(coeffs)]
+    """Σ_k coeffs[k] q^k (``powers`` from :func:`powers_of`, at least len(coeffs) of them)."""
+    powers = powers_of(q, len(coeffs)) if powers is None else powers[..., : len(coeffs)]
     return jnp.sum(powers * jnp.asarray(coeffs, dtype=powers.dtype), axis=-1)
 
 
@@ -151,11 +152,11 @@ def _atan_ratio_and_derivatives(q: Array):
     g = jnp.arctan(r) / r
     g1 = (1.0 / (1.0 + qs) - g) / (2.0 * qs)
     g2 = (-1.0 / (1.0 + qs) ** 2 - 3.0 * g1) / (2.0 * qs)
-    powers = _powers(q, len(_G))
+    table = powers_of(q, len(_G))
     return (
-        jnp.where(small, _series(_G, q, powers), g),
-        jnp.where(small, _series(_G1, q, powers), g1),
-        jnp.where(small, _series(_G2, q, powers), g2),
+        jnp.where(small, _series(_G, q, table), g),
+        jnp.where(small, _series(_G1, q, table), g1),
+        jnp.where(small, _series(_G2, q, table), g2),
     )
 
 
