@@ -25,8 +25,12 @@ no longer than ``corner_step`` may pass a corner: a turn up to 1.25 rad, a corre
 the increment; see :func:`_accept`); under
 natural-parameter control also only if sign(det J) did not change (a critical point: the
 run stops with ``RESULTS.critical_point`` when the step shrinks below its minimum) and the
-path did not turn back in p (``RESULTS.fold``).  Rejected steps are halved; quick
-convergence grows the next step.  Nothing unconverged is ever recorded.
+path did not turn back in p (``RESULTS.fold``).  Pseudo-arclength passes folds, and a sign
+change without a fold only with a step no longer than max(``corner_step``, 2 ``min_step``)
+(longer steps across the near-bifurcation of an imperfect network land on its unstable
+branch); its first step from the start is a natural-parameter step (see
+:func:`_first_arclength_step`).  Rejected steps are halved; quick convergence grows the
+next step.  Nothing unconverged is ever recorded.
 
 The whole run is one ``lax.while_loop`` over a typed :class:`PathState`; the loop may stop
 after a given number of accepted steps and be resumed from its state (progress and
@@ -317,8 +321,24 @@ def _predict(c: PathState, problem, param, settings):
     guess = guess.at[-1].set(jnp.where(landing & c.primed, 1.0, guess[-1]))
     natural = NaturalParameter().border(tau, problem.weights)
     along = param.border(tau, problem.weights)
-    border = jax.tree_util.tree_map(lambda n, a: jnp.where(landing, n, a), natural, along)
+    fixed = landing | _first_arclength_step(c, param)
+    border = jax.tree_util.tree_map(lambda n, a: jnp.where(fixed, n, a), natural, along)
     return y, guess, border
+
+
+def _first_arclength_step(c: PathState, param) -> Array:
+    """Whether the next attempt is an arclength path's first step from its start: it is taken
+    and judged as a natural-parameter step (the corrector at the predictor's p; no critical
+    point crossed; no corner step).  A probe path starts at a near-straight network, a
+    near-bifurcation whose path rises almost vertically in force at fixed geometry: there the
+    arclength corrector's hyperplane, blind to the forces, contains the unbuckled branch at
+    every force, and the first step landed on it or on a higher mode: a 5-node clamped–clamped
+    column at 26.6 pN (Euler load 2.8 pN), every step reported stable; the unit mesh of
+    Fig. 6 at 188 pN, peaking at 199 pN, against 3.88 pN under displacement control.  At
+    fixed p Newton finds the branch the imperfection selects, as under displacement control,
+    and the path's tangent is taken there.  The corner rule does not apply to this step (it
+    once accepted such a landing)."""
+    return c.primed & (c.steps == 0) & param.passes_folds
 
 
 def _accept(c: PathState, problem, param, settings, y, guess, y1, converged, sign, v):
@@ -338,13 +358,23 @@ def _accept(c: PathState, problem, param, settings, y, guess, y1, converged, sig
     # shorter than min_step).  The corrector then moves ~tan(turn) × the increment, in
     # proportion to the step, unlike a jump to another branch; tiny steps may pass it.
     corner_step = 0.0 if settings.corner_step is None else settings.corner_step  # None (follow_path by hand): never
-    corner = ((c.ds <= corner_step) & (turn <= _CORNER_TURN)
+    first = _first_arclength_step(c, param)
+    corner = ((c.ds <= corner_step) & (turn <= _CORNER_TURN) & ~first
               & (corrector <= _CORNER_RATIO * increment + floor))
     smooth, turned = smooth | corner, turned | corner
     sign_flip = (sign != c.sign) & settings.detect_critical_points
     fold = tau1[-1] <= 0
     natural_ok = ~sign_flip & ~fold
-    ok = converged & smooth & turned & (sign != 0) & (natural_ok | param.passes_folds)
+    # Arclength passes folds, and a critical point only with a step no longer than the corner
+    # step (at least 2 min_step): a long step across the near-bifurcation of an imperfect
+    # network lands, on the corrector's hyperplane, on the unstable branch beyond it (an
+    # imperfect pitchfork in tests/test_path.py; the 4-generation outcrop's first loading step
+    # at 0.31 pN, where displacement control buckles it at 0.18 pN); shorter steps follow the
+    # turn.  An even number of crossings keeps the sign: the first-step rule guards the start.
+    crossing_step = jnp.maximum(corner_step, 2.0 * settings.min_step)
+    crossing_ok = ~sign_flip | fold | (c.ds <= crossing_step)
+    passes = (crossing_ok & ~first) | natural_ok if param.passes_folds else natural_ok
+    ok = converged & smooth & turned & (sign != 0) & passes
     return jnp.where(c.primed, ok, converged), tau1, sign_flip, fold
 
 

@@ -56,7 +56,9 @@ class PathSettings(eqx.Module):
         ``method="arclength"`` (at most 1e-3 × the largest step), 0 otherwise (at fixed
         load or displacement a corner step may land on another branch).
     detect_critical_points : reject natural-parameter steps across which sign(det J)
-        changes (the path crossed a critical point or jumped branch): True.
+        changes (the path crossed a critical point or jumped branch), and arclength steps
+        longer than max(``corner_step``, 2 ``min_step``) across which it changes without a
+        fold (a long step across a near-bifurcation lands on the unstable branch): True.
     atol : Newton tolerance on ‖F‖∞ (dimensionless): ``socbjax.default_atol`` | 1e-10.
     max_iterations, max_backtracks : Newton caps: 40, 16 | 25, 12.
     linear_solver : "dense", "sparse" or "auto" (sparse above 1,500 unknowns): "auto".

@@ -64,6 +64,18 @@ def test_clamped_pinned_column_matches_the_shooting_elastica(supports):
     assert any(p.kind == "force_maximum" for p in result.limit_points)
 
 
+def test_arclength_starts_on_the_buckled_branch_of_a_near_straight_column():
+    """A straight column under the probe is a near-bifurcation: its path rises almost vertically
+    in force at fixed geometry, where the arclength hyperplane (blind to forces) holds the
+    unbuckled branch at every force.  The first step once landed there at 26.6 pN (Euler load
+    4π²EI/L² = 2.8 pN), every step reported stable; it must follow the exact elastica."""
+    L, EI = 1.0, 0.071
+    result = sj.compress(sj.column(5, supports=("clamped", "clamped"), dim=2, length=L, EI=EI), 0.3, method="arclength")
+    assert result.completed and result.stable.all()
+    u, F = _loading(result)
+    np.testing.assert_allclose(F, _pinned_pinned_force(0.5 * u, L=0.5 * L, EI=EI), rtol=1e-3)
+
+
 def test_unloading_retraces_loading_and_methods_agree():
     net = sj.column(5, supports=("pinned", "pinned"), dim=2)
     disp = sj.compress(net, 0.25, unload=True)
@@ -126,7 +138,11 @@ def test_unit_mesh_buckles_collapses_and_recovers():
     probe retraces the loading curve (a reversible collapse)."""
     mesh = sj.unit_dendritic_mesh(dim=2)
     result = sj.compress(mesh, 0.35, unload=True, method="arclength")  # the mother crosses the surface at u ≈ 0.40 µm
-    assert result.completed and result.converged.all()
+    assert result.completed and result.converged.all() and result.stable.all()
+    # the branch that displacement control follows (the path does not depend on its
+    # parametrisation): the arclength path's first step once landed on another, peaking at 199 pN
+    peak = sj.compress(mesh, 0.05, throw=False).force.max()
+    assert result.force.max() == pytest.approx(peak, rel=1e-3)  # the largest recorded step of each
     bare_mother = 20.1907 * 0.071 / 1.0**2  # clamped–pinned Euler load of the 1 µm mother
     load = result.phase == 1
     u, F = result.displacement[load], result.force[load]

@@ -101,6 +101,44 @@ def test_a_corner_of_the_path_is_passed_by_small_steps_only_when_allowed(method)
     assert stopped.result == sj.RESULTS.step_too_small and 0.5 - 1e-6 < p0.max() < 0.5 + 1e-6
 
 
+class Pitchfork(eqx.Module):
+    """x³ − (p − ½) x − ε = 0, ε = 10⁻⁶: an imperfect pitchfork.  The path from p = 0 (x ≈ 2ε)
+    turns up at p ≈ ½ onto x ≈ +√(p − ½) (det J = 3x² − (p − ½) > 0); beyond ½ a middle
+    branch x ≈ −ε/(p − ½) is unstable (det J < 0).  Independent reference: the cubic."""
+
+    def initial_state(self):
+        return jnp.asarray([2.0e-6])
+
+    def frames(self, state):
+        return None
+
+    def residual(self, state, control, frames):
+        return state**3 - (control.load_factor - 0.5) * state - 1e-6
+
+
+def test_arclength_does_not_step_across_a_near_bifurcation_onto_the_unstable_branch():
+    """A step of 0.05 from below p = ½ lands, on the corrector's hyperplane, on the unstable
+    middle branch beyond it (sign(det J) flips without a fold); the old engine accepted it and
+    followed that branch to p = 1, flagged unstable.  Such steps are now cut back until they
+    follow the turn: every point on the cubic, det J of one sign, x(1) = the stable root."""
+    weights = jnp.asarray([1.0, 1.0])
+    problem = sj.PathProblem(Pitchfork(), sj.Control.make(0.0), sj.Control.make(1.0), weights, weights)
+    settings = sj.PathSettings(method="arclength", initial_step=0.05, max_step=0.05, min_step=1e-8, max_steps=400,
+                               max_attempts=5000, grow=1.5, fast_iterations=4, max_corrector_ratio=0.5,
+                               max_turn=0.6, corrector_floor=1e-12, atol=1e-12, max_iterations=25,
+                               max_backtracks=12)
+    recorder = sj.StepRecorder(400)
+    state = sj.follow_path(problem, sj.start_path(Pitchfork().initial_state(), 0.0, settings, recorder), settings,
+                           sj.DenseLU(), recorder)
+    rows = state.recorder.rows(int(state.steps))
+    x, p, sign = rows["X"][:, 0], rows["P"], rows["SIGN"]
+    assert state.result == sj.RESULTS.successful and p[-1] == pytest.approx(1.0)
+    np.testing.assert_allclose(x**3 - (p - 0.5) * x, 1e-6, atol=1e-11)
+    assert np.all(sign == sign[0]) and np.all(3 * x**2 - (p - 0.5) > 0)
+    stable_root = max(np.roots([1.0, 0.0, -0.5, -1e-6]).real)
+    assert x[-1] == pytest.approx(stable_root, rel=1e-9)
+
+
 # ------------------------------------------------------------------ the load ramp of solve
 def test_aggressive_first_step_is_cut_back_and_converges():
     """PL²/EI = 10 in one step: Newton from the straight state may fail; cut-back rescues it."""
