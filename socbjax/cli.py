@@ -21,7 +21,7 @@ from ._progress import plural  # stdlib only
 __all__ = ["main", "build_parser"]
 
 # Defaults stop before the first node crosses the surface (without --contact): the unit mesh's mother at
-# u ≈ 0.44 µm, the default 8-generation outcrop (seed 0) at u ≈ 0.33 µm (both with actin's twist).
+# u ≈ 0.44 µm, the default 8-generation outcrop (seed 0) at u ≈ 0.34 µm (both with actin's twist).
 _DEFAULT_DISPLACEMENT = {"unit-mesh": 0.35, "outcrop": 0.2, "column": None}
 # The column's supports (socbjax.SUPPORTS, here without importing the solver); its default is
 # fit's: a clamped–pinned column (Euler load 20.19 EI/L²) crosses the surface at u ≈ 0.39 L,
