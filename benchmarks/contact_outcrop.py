@@ -19,10 +19,10 @@ Writes ``contact_outcrop.json`` and ``contact_outcrop.png``.
 
 Run:  PYTHONPATH=. python benchmarks/contact_outcrop.py [--quick] [--out DIR]
 (default: 8 generations, 6 µm gap, 3 µm and back, 2026-12-07 on 2 cores: with contact
-completed, 252 steps, 1,252 Newton iterations, 631 s first call (1,519 s before the near
+completed, 271 steps, 1,338 Newton iterations, 625 s first call (1,519 s before the near
 list of ``Contact(slot_capacity=...)``), up to 27 contacts,
-smallest gap +0.664 nm, force 1.51× the contact-free one at 3 µm; without, 67 s, strands
-crossing the surfaces from u = 0.330 µm (dotted in the figure from there); --quick: 6
+smallest gap +0.664 nm, force 1.51× the contact-free one at 3 µm; without, 55 s, strands
+crossing the surfaces from u = 0.342 µm (dotted in the figure from there); --quick: 6
 generations, 1.5 µm and back, 2026-12-07 on 2 cores: with contact completed, 232 steps, 492
 Newton iterations, 279 s first call, at most 3 contacts, smallest gap +0.687 nm, force 1.04×
 at 1.5 µm; without, 47 s, crossing from u = 1.062 µm).
