@@ -74,10 +74,11 @@ def compress(network: Network, displacement, *, at=None, unload: bool = False, m
         network's ``loads``.  Default: the network's loads or, if it has none, 1e-4 EI/L² per
         strand (L: the longest strand) — an imperfection is needed: a straight inextensible
         strand between probe and surface carries any axial force (singular stiffness).  Far
-        smaller ones leave the start too sharp a near-bifurcation for the path (1e-8 pN on a
-        clamped–clamped column, 700× below the default: a fold under displacement control,
-        the unbuckled branch under arclength; docs/equations.md, "The start of an arclength
-        path").
+        smaller ones leave the start too sharp a near-bifurcation for the path: 1e-7 pN on a
+        pinned–pinned column of EI 0.071, 70× below the default, stops at the start (a fold
+        under displacement control, a critical point under arclength); 1e-8 pN on a
+        clamped–clamped one still gives the unbuckled branch under arclength
+        (docs/equations.md, "The start of an arclength path").
     settings : :class:`socbjax.PathSettings` (steps in µm, max step capped at displacement/4;
         Newton tolerance 1e-10; ``linear_solver``, ``quadrature_order``).
     checkpoint : a file path or :class:`socbjax.Checkpoint` (path, every=50 steps,
