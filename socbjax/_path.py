@@ -373,7 +373,7 @@ def _accept(c: PathState, problem, param, settings, y, guess, y1, converged, sig
     # turn.  An even number of crossings keeps the sign: the first-step rule guards the start.
     crossing_step = jnp.maximum(corner_step, 2.0 * settings.min_step)
     crossing_ok = ~sign_flip | fold | (c.ds <= crossing_step)
-    passes = (crossing_ok & ~first) | natural_ok if param.passes_folds else natural_ok
+    passes = jnp.where(first, natural_ok, crossing_ok) if param.passes_folds else natural_ok
     ok = converged & smooth & turned & (sign != 0) & passes
     return jnp.where(c.primed, ok, converged), tau1, sign_flip, fold
 
