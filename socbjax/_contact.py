@@ -132,7 +132,9 @@ class Contact(eqx.Module):
         nearest to an obstacle, listed before each path step; the others carry the
         contact-free kernel and idle slots, :mod:`socbjax._contact_near`).  Default: all
         segments up to 96, else max(96, S/3).  More segments within ``reach`` of the contact
-        band stop the path with ``RESULTS.contact_capacity``.  Planes only, without
+        band than K: :func:`socbjax.compress` doubles K, warns and goes on from its last step
+        (one more compilation); ``solve`` and traced compressions stop with
+        ``RESULTS.contact_capacity``.  Planes only, without
         self-contact (a sphere's or a pair's slot is never idle); give S or more for every
         segment.
     lumped : for comparison only: put each contact force on the segment's two nodes

@@ -22,11 +22,15 @@ Nearness of segment s to obstacle k is judged as the closest-point rule judges i
 possible gap φ_k(chord midpoint) − l/2 − d/2 against the band max(10 δ, l/20); a segment is
 listed when that margin is below ``reach`` (µm; ``Contact(reach=...)``) for some obstacle.
 More such segments than K is an overflow: the path stops with ``RESULTS.contact_capacity``,
-never truncating the list silently.  The list is data (the K segment ids), so a change of the
+never truncating the list silently.  A host-driven :func:`socbjax.compress` then doubles K
+(:func:`grow_near_list`; every segment once 2K ≥ S), warns, and goes on from its last step
+with one recompilation; traced paths (``solve``, ``compress(..., at=...)``) stop.  The list is data (the K segment ids), so a change of the
 near set never recompiles.
 """
 
 from __future__ import annotations
+
+import dataclasses
 
 import equinox as eqx
 import jax
@@ -34,7 +38,7 @@ import jax.numpy as jnp
 
 from ._contact_segment import ContactSetup, near_band, rest_sigma, signed_distance
 
-__all__ = ["NearList", "near_margins", "near_list", "idle_slot_rows", "take_segments"]
+__all__ = ["NearList", "near_margins", "near_list", "idle_slot_rows", "take_segments", "grow_near_list"]
 
 # per-segment fields of ContactSetup that the segment kernels read
 _PER_SEGMENT = ("owns_start", "owns_end", "slot_smooth_start", "slot_smooth_end", "active", "pinned", "smooth_start",
@@ -90,3 +94,11 @@ def take_segments(setup: ContactSetup, ids) -> ContactSetup:
     """``setup`` restricted to the segments ``ids`` [K] (its per-segment fields gathered)."""
     names = [n for n in _PER_SEGMENT if getattr(setup, n) is not None]
     return eqx.tree_at(lambda s: [getattr(s, n) for n in names], setup, [getattr(setup, n)[ids] for n in names])
+
+
+def grow_near_list(setup: ContactSetup, n_segments: int) -> ContactSetup:
+    """``setup`` with twice the near list's capacity K, or every segment (K = 0: no list)
+    once 2K ≥ ``n_segments``.  The state's layout does not depend on K (every segment keeps
+    its slots), so a path continues from its last state with the grown list."""
+    K = 2 * setup.slot_capacity
+    return dataclasses.replace(setup, slot_capacity=0 if K >= n_segments else K)

@@ -28,6 +28,7 @@ import jax.numpy as jnp
 import numpy as np
 from jax.flatten_util import ravel_pytree
 
+from ._contact_near import grow_near_list
 from ._path import PathProblem, StepRecorder, follow_path, path_weights, start_path, state_unravel
 from ._path_settings import PathSettings
 from ._probe import observe
@@ -217,6 +218,10 @@ class _Run:
             length = self.chunk if next_save is None else max(min(self.chunk, next_save - before), 1)
             state, force = _chunk(problem, state, settings, self.inner, self.recorder, jnp.asarray(length, jnp.int32))
             steps = int(state.steps)  # waits for the chunk
+            if self._grow_near_list(state, ends[0] + float(state.p) * (ends[1] - ends[0])):
+                problem = phase_problem(self.model, index, u0, self.u_max, self.settings)
+                state = eqx.tree_at(lambda s: (s.result, s.done), state, (RESULTS.successful, jnp.asarray(False)))
+                continue
             self._adapt(steps - before, time.perf_counter() - t)
             done = bool(state.done) or steps >= self.settings.max_steps
             if not done and next_save is not None and steps >= next_save:  # saved before reporting: an
@@ -225,6 +230,22 @@ class _Run:
             self.progress(self.names[index], ends[0] + float(state.p) * (ends[1] - ends[0]), steps, float(force), done)
             if done:
                 return state
+
+    def _grow_near_list(self, state, u: float) -> bool:
+        """After a near-list overflow (more segments near a surface than ``Contact(slot_capacity)``
+        lists: ``RESULTS.contact_capacity`` with the list in use), the model with twice the
+        list (:func:`socbjax._contact_near.grow_near_list`); the path goes on from its last
+        accepted state, which the overflowing step left unchanged.  Returns whether it grew."""
+        setup = getattr(self.model, "contact", None)
+        if setup is None or not setup.listed or result_name(state.result) != "contact_capacity":
+            return False
+        grown = grow_near_list(setup, self.model.network.n_segments)
+        size = grown.slot_capacity or self.model.network.n_segments
+        warnings.warn(f"compress: more than slot_capacity={setup.slot_capacity} segments came near a surface at "
+                      f"u = {u:.4g} µm; the near list grows to {size} and the path goes on from its last step (one "
+                      f"more compilation; Contact(slot_capacity={size}) starts with it)", stacklevel=6)
+        self.model = eqx.tree_at(lambda m: m.contact, self.model, grown)
+        return True
 
     def _adapt(self, steps: int, seconds: float) -> None:
         """The next chunk's length: CHUNK_SECONDS at the last chunk's time per step, at most 4×

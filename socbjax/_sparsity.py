@@ -88,7 +88,9 @@ def template_model(model):
 def _residual_fn(template):
     """The residual as a function of (flat state, probe_held): one function whose Jacobian at
     probe_held = ½ has the union pattern of the held and released probe (the settle phase)."""
-    state0 = template.initial_state()
+    # the structure only: the pattern is found at random points around it, so the contact
+    # slots need not sit on their closest points (settling them compiles for seconds)
+    state0 = template.state_template()
     x0, unravel = ravel_pytree(state0)
     frames = template.frames(state0)
     if getattr(template, "n_pairs", 0):  # the static part: an empty pair list (socbjax._paired)

@@ -2,8 +2,8 @@
 nearest to a plane carry the contact kernel, the others the contact-free one.  Checked
 against the full model (every segment with its slots): a cantilever pressed onto a wall,
 and (slow) a channel column's force curve through contact with forward-mode derivatives;
-a list too short stops the path and says so; a step that brings an unlisted segment near a
-plane is refused."""
+a list too short stops a solve and says so, and compress grows it; a step that brings an
+unlisted segment near a plane is refused."""
 
 import numpy as np
 import pytest
@@ -85,6 +85,22 @@ def test_a_near_list_follows_the_full_model_through_the_channel():
     np.testing.assert_array_equal(np.asarray(count_l), np.asarray(count_f))
     np.testing.assert_allclose(np.asarray(dF_l), np.asarray(dF_f), rtol=1e-7, atol=1e-9)
     assert np.all(np.isfinite(np.asarray(dF_f))) and abs(float(dF_f[-1])) > 0
+
+
+def test_compress_grows_a_near_list_that_overflows_and_ends_where_the_full_model_does():
+    """An 8-segment channel column listed 2 at a time: compress (host-driven) doubles the list
+    each time more segments come near a wall (2 → 4 → 8 = every segment), says so, and ends at
+    the full model's equilibrium (every segment with its slots) past the first contact."""
+    net = sj.column(9, length=L, EI=EI, dim=2, supports=("pinned", "pinned"))
+    walls = (sj.Plane([0, -H], [0, 1]), sj.Plane([0, H], [0, -1]))
+    U = 0.026  # past the contact at Δ/L ≈ 0.022, before the line contact's critical point
+    with pytest.warns(UserWarning, match="segments came near a surface") as caught:
+        grown = sj.compress(net, U, contact=_contact(walls, 2))
+    assert [str(w.message).split("grows to ")[1].split()[0] for w in caught] == ["4", "8"]
+    full = sj.compress(net, U, contact=_contact(walls, 8))
+    assert grown.completed and int(grown.contact_count[-1]) >= 1
+    np.testing.assert_allclose(float(grown.force[-1]), float(full.force[-1]), rtol=1e-9)
+    np.testing.assert_allclose(np.asarray(grown.positions[-1]), np.asarray(full.positions[-1]), atol=1e-10)
 
 
 def test_a_step_that_brings_an_unlisted_segment_near_a_plane_is_refused():
