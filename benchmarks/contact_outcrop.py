@@ -13,19 +13,24 @@ Filament–filament contact in 3D is built, also with the sparse solver (socbjax
 but not used here: with it the 4-generation outcrop completes 1.5 µm and back (154 steps,
 2,424 s on 2 cores, about 10 s per step; docs/equations.md, "Sparse solver with pairs"), and
 the 8-generation one was not run with it, so strands still pass through each other in these
-runs.
+runs.  How much is counted (:func:`strand_overlaps`, third panel): at every recorded step
+the segment pairs whose centre lines come closer than d, and the deepest overlap.  The
+as-built 8-generation outcrop (seed 0) already has one: the centre lines of segments 162
+and 487, of different strands, pass 1.2 nm apart.
 
 Writes ``contact_outcrop.json`` and ``contact_outcrop.png``.
 
 Run:  PYTHONPATH=. python benchmarks/contact_outcrop.py [--quick] [--out DIR]
-(default: 8 generations, 6 µm gap, 3 µm and back, 2026-12-07 on 2 cores: with contact
-completed, 271 steps, 1,338 Newton iterations, 625 s first call (1,519 s before the near
-list of ``Contact(slot_capacity=...)``), up to 27 contacts,
-smallest gap +0.664 nm, force 1.51× the contact-free one at 3 µm; without, 55 s, strands
-crossing the surfaces from u = 0.342 µm (dotted in the figure from there); --quick: 6
-generations, 1.5 µm and back, 2026-12-07 on 2 cores: with contact completed, 232 steps, 492
-Newton iterations, 279 s first call, at most 3 contacts, smallest gap +0.687 nm, force 1.04×
-at 1.5 µm; without, 47 s, crossing from u = 1.062 µm).
+(default: 8 generations, 6 µm gap, 3 µm and back, 2026-12-08 on 2 cores: with contact
+completed, 271 steps, 1,338 Newton iterations, 598 s first call (625 s on 2026-12-07, 1,519 s
+before the near list of ``Contact(slot_capacity=...)``), up to 27 contacts, smallest gap
++0.664 nm, force 1.51× the contact-free one at 3 µm, up to 7 pairs of segments that share
+no node closer than d at one step, the deepest 6.99 nm (centre lines crossing); without,
+53 s, strands crossing the surfaces from u = 0.342 µm (dotted in the figure from there); --quick: 6
+generations, 1.5 µm and back, 2026-12-08 on 2 cores: with contact completed, 237 steps, 505
+Newton iterations, 171 s first call, at most 3 contacts, smallest gap
++0.687 nm, force 1.04× at 1.5 µm, up to 2 segment pairs closer than d (deepest 5.68 nm);
+without, 23 s, crossing from u = 1.044 µm).
 """
 
 from __future__ import annotations
@@ -33,6 +38,7 @@ from __future__ import annotations
 import time
 
 import _common  # noqa: F401  (sets OPENBLAS_NUM_THREADS before numpy loads)
+import jax
 import numpy as np
 
 import socbjax as sj
@@ -46,12 +52,58 @@ def run(net, U, contact) -> dict:
     wall = time.perf_counter() - t0
     iterations = int(np.sum(res.iterations))
     print(f"  {'contact' if contact else 'contact-free'}: {res.summary()}", flush=True)
-    return {"status": res.status_message.split(":")[0], "completed": bool(res.completed), "steps": int(res.n_steps),
+    pairs, depth = strand_overlaps(res, contact.diameter) if contact is not None else (None, None)
+    return {"overlap_pairs": pairs, "overlap_depth": depth, "status": res.status_message.split(":")[0], "completed": bool(res.completed), "steps": int(res.n_steps),
             "newton_iterations": iterations, "wall_s": wall, "s_per_iteration": wall / max(iterations, 1),
             "u": np.asarray(res.displacement), "F": np.asarray(res.force), "phase": np.asarray(res.phase),
             "crossing": None if res.first_crossing is None else int(res.first_crossing.step),
             "count": None if contact is None else np.asarray(res.contact_count),
             "min_gap": None if contact is None else np.asarray(res.min_gap)}
+
+
+def _piece_distances(p1, q1, p2, q2):
+    """Exact distances [M] between the straight pieces p1–q1 and p2–q2 ([M, 3] each, µm)."""
+    d1, d2, r = q1 - p1, q2 - p2, p1 - p2
+    a, e = np.einsum("ij,ij->i", d1, d1), np.einsum("ij,ij->i", d2, d2)
+    b, c, f = np.einsum("ij,ij->i", d1, d2), np.einsum("ij,ij->i", d1, r), np.einsum("ij,ij->i", d2, r)
+    denom = a * e - b * b
+    s = np.where(denom > 1e-14 * a * e, np.clip((b * f - c * e) / np.where(denom > 0, denom, 1.0), 0.0, 1.0), 0.0)
+    t = (b * s + f) / e
+    s = np.where(t < 0.0, np.clip(-c / a, 0.0, 1.0), np.where(t > 1.0, np.clip((b - c) / a, 0.0, 1.0), s))
+    t = np.clip(t, 0.0, 1.0)
+    return np.linalg.norm(p1 + s[:, None] * d1 - p2 - t[:, None] * d2, axis=1)
+
+
+def strand_overlaps(res, d: float, points: int = 24) -> tuple[np.ndarray, np.ndarray]:
+    """Per recorded step: (segment pairs whose centre lines come closer than the diameter d,
+    deepest such overlap d − distance in µm, 0 where none).  Without filament–filament
+    contact nothing keeps strands apart; this counts where they overlap at the recorded
+    steps (a strand that passed through another between two steps is not counted).  Centre
+    lines: ``sj.filament_curve`` of the nodal state at ``points`` points per segment (the
+    contact-free interpolant: a surface contact's point force bends its segment slightly
+    differently), exact distances between the straight pieces (scipy KD-tree broad phase).
+    Segments that share a node (junction daughters: their mother node) are skipped."""
+    from scipy.spatial import cKDTree
+
+    net = res.network
+    node_of = np.asarray(net.attach)[np.asarray(net.segments)]  # [S, 2]
+    curve = jax.jit(lambda r, t, m, n: sj.filament_curve(net, r, t, m, n, points_per_segment=points).positions)
+    count, deepest = np.zeros(len(res.displacement), int), np.zeros(len(res.displacement))
+    for k in range(len(res.displacement)):
+        P = np.asarray(curve(res.positions[k], res.tangents[k], res.moments[k], res.segment_forces[k]))
+        start, end = P[:, :-1].reshape(-1, 3), P[:, 1:].reshape(-1, 3)
+        owner = np.repeat(np.arange(P.shape[0]), points - 1)
+        reach = np.linalg.norm(end - start, axis=1).max() + d
+        pairs = cKDTree(0.5 * (start + end)).query_pairs(reach, output_type="ndarray")
+        i, j = owner[pairs[:, 0]], owner[pairs[:, 1]]
+        apart = (i != j) & ~np.any(node_of[i][:, :, None] == node_of[j][:, None, :], axis=(1, 2))
+        pairs, i, j = pairs[apart], i[apart], j[apart]
+        dist = _piece_distances(start[pairs[:, 0]], end[pairs[:, 0]], start[pairs[:, 1]], end[pairs[:, 1]])
+        close = dist < d
+        if close.any():
+            count[k] = len({(min(a, b), max(a, b)) for a, b in zip(i[close], j[close])})
+            deepest[k] = d - dist[close].min()
+    return count, deepest
 
 
 def departure(with_contact: dict, free: dict) -> tuple[float, float]:
@@ -73,7 +125,7 @@ def departure(with_contact: dict, free: dict) -> tuple[float, float]:
 
 
 def figure(c: dict, f: dict, d: float, args, title: str) -> None:
-    fig, axes = _common.new_figure((11.0, 4.2), ncols=2)
+    fig, axes = _common.new_figure((16.0, 4.2), ncols=3)
     ax = axes[0]
     k = len(f["u"]) if f["crossing"] is None else f["crossing"] + 1
     ax.plot(f["u"][:k], f["F"][:k], color="0.5", lw=1.2, label="no contact")
@@ -102,6 +154,16 @@ def figure(c: dict, f: dict, d: float, args, title: str) -> None:
     ax.set_ylabel("smallest surface gap (nm)")
     ax.set_title("smallest gap to the probe face or substrate", fontsize=9)
     ax.legend(fontsize=8)
+    ax = axes[2]  # what the surfaces-only contact leaves out
+    ax.plot(c["u"], c["overlap_pairs"], ".", ms=3, color="C1")
+    ax.set_xlabel("probe displacement u (µm)")
+    ax.set_ylabel("segment pairs closer than d", color="C1")
+    ax.yaxis.get_major_locator().set_params(integer=True)
+    ax.set_title("strands through each other (no filament–filament contact here)", fontsize=9)
+    ax3 = ax.twinx()
+    ax3.plot(c["u"], c["overlap_depth"] * 1e3, ".", ms=2, color="C4")
+    ax3.set_ylabel("deepest overlap d − distance (nm)", color="C4")
+    ax3.set_ylim(0, d * 1e3 * 1.05)
     _common.save_figure(fig, args.out, "contact_outcrop")
 
 
@@ -121,6 +183,8 @@ def main(argv=None) -> int:
         ["time per Newton iteration (s)", f"{c['s_per_iteration']:.3f}", f"{f['s_per_iteration']:.3f}"],
         ["most contacts at once", int(np.max(c["count"])), "—"],
         ["smallest gap (nm; bound −0.07)", f"{np.nanmin(c['min_gap']) * 1e3:.3f}", "—"],
+        ["strand pairs closer than d, most at one step", int(np.max(c["overlap_pairs"])), "—"],
+        ["deepest strand overlap (nm)", f"{np.max(c['overlap_depth']) * 1e3:.2f}", "—"],
         ["forces differ by > 1 % from u (µm)", f"{u_dep:.3f}", ""],
         ["force ratio at the deepest common u", f"{ratio:.3f}", ""],
     ], title=f"{generations}-generation outcrop, {U} µm and back")

@@ -21,7 +21,7 @@ from ._xla_flags import add_default_xla_flags  # noqa: E402
 from ._compare import ModelComparison, compare_models  # noqa: E402
 from ._compress import compress  # noqa: E402
 from ._contact import Contact, Plane, Sphere  # noqa: E402
-from ._curve import FilamentCurve  # noqa: E402
+from ._curve import FilamentCurve, filament_curve  # noqa: E402
 from ._curved import ACTIN_GJ, with_natural_curvature  # noqa: E402
 from ._dendritic import dendritic_outcrop, unit_dendritic_mesh  # noqa: E402
 from ._ensemble import EnsembleResult, compress_ensemble  # noqa: E402

@@ -199,6 +199,9 @@ def test_any_step_is_a_solution_with_its_smooth_curve():
     sol = result.solution(k)
     assert bool(sol.converged)
     curve = sol.curve(12)
+    rows = (result.positions[k], result.tangents[k], result.moments[k], result.segment_forces[k])
+    np.testing.assert_allclose(np.asarray(sj.filament_curve(result.network, *rows, points_per_segment=12).positions),
+                               np.asarray(curve.positions), rtol=0, atol=1e-14)  # the same curve from the recorded rows
     np.testing.assert_allclose(np.asarray(curve.positions[:, 0]), np.asarray(result.positions[k][:-1]), atol=1e-14)
     np.testing.assert_allclose(np.asarray(curve.positions[:, -1]), np.asarray(result.positions[k][1:]), atol=1e-8)
     axis = np.asarray(result.network.probe_direction)
