@@ -16,8 +16,11 @@ from __future__ import annotations
 import equinox as eqx
 import jax
 import jax.numpy as jnp
+import numpy as np
 
-__all__ = ["settle_locations"]
+from ._checks import is_traced
+
+__all__ = ["settle_locations", "check_start_gaps"]
 
 _ITERATIONS = 8  # alternations between the two sides of the pairs
 _INNER = 12  # safeguarded Newton steps per side
@@ -26,8 +29,9 @@ _JOINT = 6  # joint Newton steps at the end
 
 @eqx.filter_jit  # one compiled program: op by op, its Newton loops took 12 s on a 126-segment outcrop
 def settle_locations(model, state, control):
-    """``state`` with the σ of every obstacle slot and pair slot at the root of its location
-    row (``model``: a :class:`socbjax.SOCBModel` with contact; ``control``: the start's)."""
+    """(``state`` with the σ of every obstacle slot and pair slot at the root of its location
+    row, the gaps [c] µm of its c = S·C + P slots there, +inf where a slot is not counted)
+    (``model``: a :class:`socbjax.SOCBModel` with contact; ``control``: the start's)."""
     state = jax.tree_util.tree_map(jnp.asarray, state)  # the reference state may hold numpy arrays
     frames = model.frames(state)
     S, C, w = state.contacts.shape
@@ -91,5 +95,33 @@ def settle_locations(model, state, control):
         sig = jax.lax.fori_loop(0, _ITERATIONS, alternate, sig)
         sig = jax.lax.fori_loop(0, _JOINT, joint, sig)
     sig = jax.lax.stop_gradient(sig)
-    return eqx.tree_at(lambda s: (s.contacts, s.pairs), state,
-                       (state.contacts.at[..., 0].set(sig[0]), state.pairs.at[:, 2:4].set(sig[1])))
+    settled = eqx.tree_at(lambda s: (s.contacts, s.pairs), state,
+                          (state.contacts.at[..., 0].set(sig[0]), state.pairs.at[:, 2:4].set(sig[1])))
+    _, gaps, _, counted = model.contact_geometry(settled, control)[:4]
+    return settled, jax.lax.stop_gradient(jnp.where(counted, gaps, jnp.inf))
+
+
+def check_start_gaps(model, state, gaps) -> None:
+    """Raise a ValueError that names the two pieces when a counted slot of the start
+    ``state`` has its gap ``gaps`` [c] (µm, :func:`settle_locations`) below the activation
+    distance δ: there the law already pushes, so the start is not the force-free equilibrium
+    a path starts from (it would stop at once with ``RESULTS.not_equilibrium``), and below
+    zero the filaments overlap as built.  Nothing to check for traced values."""
+    if is_traced(gaps):
+        return
+    gaps = np.asarray(gaps)
+    k = int(np.argmin(gaps)) if gaps.size else 0
+    setup = model.contact
+    if not gaps.size or gaps[k] >= setup.activation:
+        return
+    S, C = model.network.n_segments, model.n_obstacles
+    if k < S * C:
+        name = setup.names[k % C]
+        what = f"segment {k // C} and {'the ' if name in ('probe face', 'substrate') else ''}{name}"
+    else:
+        i, j = np.asarray(state.pairs)[k - S * C, :2].astype(int)
+        what = f"segments {i} and {j}"
+    raise ValueError(f"contact: as built, {what} are {gaps[k] * 1e3:.3g} nm apart surface to surface (negative: "
+                     f"overlapping), below the contact activation distance δ = {float(setup.activation) * 1e3:.3g} nm; a "
+                     "path starts from a state without contact forces. Build the network with them farther apart, "
+                     "or give a smaller Contact(diameter=...) or activation")

@@ -140,7 +140,8 @@ class _Run:
 
     def __init__(self, model, u_max, unload, settings, inner, progress, checkpoint):
         self.model, self.u_max, self.settings, self.inner = model, float(u_max), settings, inner
-        self.x0 = ravel_pytree(model.initial_state())[0]
+        contact = getattr(model, "contact", None) is not None  # a start inside the law's range: refused
+        self.x0 = ravel_pytree(model.initial_state(check=True) if contact else model.initial_state())[0]
         self.recorder = StepRecorder(settings.max_steps)
         self.names = ["settle", "loading"] + (["unloading"] if unload else [])
         self.progress, self.checkpoint = progress, checkpoint

@@ -44,7 +44,7 @@ from jaxtyping import Array, Float
 from ._contact_near import near_list, near_margins
 from ._contact_pairs import PairList, broad_phase, initial_pairs, merge_pairs, pair_extra, pair_rows, pair_width, segment_table
 from ._contact_segment import SLOT_WIDTH, ContactSetup, initial_slots
-from ._contact_start import settle_locations
+from ._contact_start import check_start_gaps, settle_locations
 from ._contact_spatial import SPATIAL_SLOT_WIDTH, initial_spatial_slots
 from ._geometry import orthonormal_complement
 from ._junction import director_targets, moment_transfer, nodal_couple_transfer
@@ -288,13 +288,17 @@ class SOCBModel(eqx.Module):
     contact: ContactSetup | None = None
     name = "socb"
 
-    def initial_state(self) -> SOCBState:
+    def initial_state(self, *, check: bool = False) -> SOCBState:
         """The unloaded straight reference state (an exact solution at zero load): the
-        :meth:`state_template` with its contact slots settled on their closest points."""
+        :meth:`state_template`, contact slots settled on their closest points (``check``: a
+        ValueError where two pieces start within the law's range, :func:`check_start_gaps`)."""
         state = self.state_template()
         if self.contact is None:
             return state
-        return settle_locations(self, state, Control.make(load_factor=0.0))
+        state, gaps = settle_locations(self, state, Control.make(load_factor=0.0))
+        if check:
+            check_start_gaps(self, state, gaps)
+        return state
 
     def state_template(self) -> SOCBState:
         """The reference state before the contact start: the structure (shapes, dtypes) of

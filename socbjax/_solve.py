@@ -238,6 +238,10 @@ def solve(network: Network, forces=None, couples=None, *, model: str = "socb", s
                                       != jax.tree_util.tree_structure(state_template(disc))):
         raise TypeError(f"initial_state must be a state of the {model} model of this network "
                         f"(e.g. an earlier Solution.state), got {type(initial_state).__name__}")
+    if initial_state is None and contact is not None and not is_traced(disc.network):
+        # the contact start is checked on the host (initial_state(check=True) raises, naming
+        # the two pieces, where they start inside the law's range); traced networks settle inside
+        initial_state = disc.initial_state(check=True)
     solution = _solve(disc, initial_state, settings.traced(), inner, implicit_adjoint(adjoint, inner))
     if throw:
         return _check(solution, settings, network)

@@ -209,6 +209,21 @@ def test_channel_column_departs_from_the_elastica_at_the_wall(tmp_path):
     assert "contacts" in [t.get_text() for t in sj.plot_snapshots(back).legends[0].get_texts()]
 
 
+def test_a_start_inside_the_contact_range_is_refused_naming_the_pieces():
+    """A path starts from a force-free state: filaments built closer than the diameter (two
+    filaments 0.12 µm apart with d = 0.3 µm: −180 nm surface to surface), or a column δ/2 from
+    a wall, are refused before the path with the two pieces and their gap named."""
+    net, tip = two_filaments()
+    with pytest.raises(ValueError, match="segments 0 and 4 are -180 nm apart .* overlapping"):
+        sj.solve(net, forces={tip: np.array([0.0, -0.01])}, contact=sj.Contact(diameter=0.3, surfaces=False))
+    delta = 1e-4
+    column = sj.column(5, length=L, EI=EI, dim=2, supports=("pinned", "pinned"))
+    wall = sj.Plane([0.0, -(D / 2 + delta / 2)], [0.0, 1.0])
+    contact = sj.Contact(diameter=D, planes=(wall,), self_contact=False, surfaces=False, activation=delta)
+    with pytest.raises(ValueError, match=r"segment \d and plane 0 are 0.05 nm apart .* δ = 0.1 nm"):
+        sj.compress(column, 0.01, contact=contact)
+
+
 def test_contact_input_errors_name_the_argument():
     with pytest.raises(ValueError, match="normal"):
         sj.Plane([0, 0], [0, 0])
