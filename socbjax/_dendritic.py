@@ -326,7 +326,11 @@ def dendritic_outcrop(
     None: the paper's torsion-free model; see :func:`unit_dendritic_mesh`);
     ``natural_curvature`` the strands' rest shape (as for :func:`unit_dendritic_mesh`).  See
     the module docstring for the growth rules.  Strand ends on the surface are the pinned
-    nodes other than the probe node 0.
+    nodes other than the probe node 0.  The growth does not keep strands apart: two of them
+    may pass closer than a filament diameter (the 8-generation outcrop, seed 0, has the centre
+    lines of segments 162 and 487 1.2 nm apart), so ``compress`` with self-contact
+    (``Contact()``) refuses such a network at its start, naming the pair; another seed, or
+    ``Contact(self_contact=False)``, runs.
 
     Limits (checked before growing; ``TypeError`` for a wrong type, ``ValueError`` for a
     wrong value, naming the argument): ``generations`` an integer ≥ 1; ``gap``, ``growth``,
