@@ -24,8 +24,8 @@ listed when that margin is below ``reach`` (µm; ``Contact(reach=...)``) for som
 More such segments than K is an overflow: the path stops with ``RESULTS.contact_capacity``,
 never truncating the list silently.  A host-driven :func:`socbjax.compress` then doubles K
 (:func:`grow_near_list`; every segment once 2K ≥ S), warns, and goes on from its last step
-with one recompilation; traced paths (``solve``, ``compress(..., at=...)``) stop.  The list is data (the K segment ids), so a change of the
-near set never recompiles.
+with one recompilation; traced paths (``solve``, ``compress(..., at=...)``) stop.  The list
+is data (the K segment ids), so a change of the near set never recompiles.
 """
 
 from __future__ import annotations

@@ -88,10 +88,10 @@ def filament_curve(network, positions, tangents, moments, forces, *, points_per_
     ``bar_directions`` [S, d] default to the chords.  ``twists`` [N]: the frame angles of a
     twisting network (needed where it has natural curvature).
 
-    Public for the recorded steps of a compression (``result.positions[k]``,
-    ``result.tangents[k]``, ``result.moments[k]``, ``result.segment_forces[k]``); for a path
-    computed with contact it draws each segment without its interior contact forces (the
-    result does not store the slots; the figures draw it so too)."""
+    For step k of a compression pass ``result.positions[k]``, ``result.tangents[k]``,
+    ``result.moments[k]`` and ``result.segment_forces[k]``.  For a path computed with contact
+    this is each segment's curve without its interior contact forces (the result does not
+    store the slots; the figures draw it so too)."""
     P = int(points_per_segment)
     if P < 2:
         raise ValueError(f"points_per_segment must be at least 2 (the two end nodes), got {points_per_segment!r}")
