@@ -155,8 +155,11 @@ def _paired(model, static: ColouredSparseLU) -> PairedSparseLU:
     graph = PairGraph((static.rows.a, static.cols.a), static.n, P, W, graph_reach(edges, V), row_vertex[:n0],
                       unknown_vertex[:n0], net.n_nodes)
     # a crowded segment: the columns near it, and the live unknowns of every pair at it and
-    # at its neighbours share its rows (2 per_segment pairs: a hash cell holds that many)
-    bound = static.n_colors + 4 * model.contact.per_segment * (W - 2)
+    # at its neighbours share its rows (2 per_segment pairs: a hash cell holds that many).
+    # Twice that: the greedy colouring goes past it (the 6-generation outcrop with self-contact
+    # needed 334 colours at u = 0.49 µm against 320 prepared, and the path stopped).  Only the
+    # colours in use are evaluated; the rest is memory ([max_colors, n] products).
+    bound = static.n_colors + 8 * model.contact.per_segment * (W - 2)
     chunk = 16
     return PairedSparseLU(graph=graph, n=static.n, n_pairs=P, width=W, max_colors=-(-bound // chunk) * chunk,
                           chunk=chunk)
