@@ -116,10 +116,11 @@ def compress(network: Network, displacement, *, at=None, unload: bool = False, m
     bar.start()  # before the set-up below: its first run compiles too (op by op)
     try:
         model = eqx.tree_at(lambda m: m.network, model, network.replace(loads=applied_loads(network, perturbation)))
-        if contact is not None:  # a start inside the law's range is refused before the solver's set-up
-            model.initial_state(check=True)  # (compiled once: the path's start reuses the program)
+        # the path's start; with contact, one inside the law's range is refused here, before the
+        # sparse solver's set-up (minutes with pairs on large networks)
+        start = model.initial_state(check=True) if contact is not None else model.initial_state()
         inner = linear_solver_for(model, settings.linear_solver)
-        rec, extra, result = run_phases(model, displacement, unload, settings, inner, progress=bar,
+        rec, extra, result = run_phases(model, start, displacement, unload, settings, inner, progress=bar,
                                         checkpoint=checkpoint)
     finally:
         bar.close()

@@ -138,10 +138,9 @@ def _check_records(records: dict, n: int, where) -> None:
 class _Run:
     """The phases of one host-driven compression, with their records and checkpoints."""
 
-    def __init__(self, model, u_max, unload, settings, inner, progress, checkpoint):
+    def __init__(self, model, start, u_max, unload, settings, inner, progress, checkpoint):
         self.model, self.u_max, self.settings, self.inner = model, float(u_max), settings, inner
-        contact = getattr(model, "contact", None) is not None  # a start inside the law's range: refused
-        self.x0 = ravel_pytree(model.initial_state(check=True) if contact else model.initial_state())[0]
+        self.x0 = ravel_pytree(start)[0]
         self.recorder = StepRecorder(settings.max_steps)
         self.names = ["settle", "loading"] + (["unloading"] if unload else [])
         self.progress, self.checkpoint = progress, checkpoint
@@ -271,10 +270,11 @@ def concat(parts: list[dict]) -> dict:
     return {k: np.concatenate([p[k] for p in parts]) for k in parts[0]}
 
 
-def run_phases(model, u_max, unload, settings, inner, *, progress=None, checkpoint=None):
-    """Run the settle/loading/unloading phases on the host (concrete values); returns
-    (records of every recorded step, extra {u0, sign_ref}, result)."""
-    run = _Run(model, u_max, unload, settings, inner, progress or Progress(False, u_max), checkpoint)
+def run_phases(model, start, u_max, unload, settings, inner, *, progress=None, checkpoint=None):
+    """Run the settle/loading/unloading phases on the host (concrete values) from ``start``
+    (the model's initial state); returns (records of every recorded step, extra {u0,
+    sign_ref}, result)."""
+    run = _Run(model, start, u_max, unload, settings, inner, progress or Progress(False, u_max), checkpoint)
     if checkpoint and Path(checkpoint.path).exists():
         if checkpoint.resume:
             run.resume()
