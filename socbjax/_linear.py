@@ -375,7 +375,10 @@ class Bordered(AbstractFullRankSolver):
         u, v = uv[0], uv[1]
         dp = (h - a @ u) / (b - a @ v)
         dx = u - v * dp
-        return jnp.concatenate([dx, dp[None]]), lx.RESULTS.successful, {"sign": stats["sign"][0], "tangent": v}
+        out = {"sign": stats["sign"][0], "tangent": v}
+        if "overflow" in stats:  # PairedSparseLU: more colours than prepared
+            out["overflow"] = stats["overflow"][0]
+        return jnp.concatenate([dx, dp[None]]), lx.RESULTS.successful, out
 
     def transpose(self, state, options):
         raise NotImplementedError("Bordered is a forward solver of path correctors; it is never transposed")

@@ -21,8 +21,9 @@ Per distinct pair list (host side, cached): the union pattern, coloured greedily
 where J costs one JVP per colour actually used, evaluated ``chunk`` colours at a time up to
 ``max_colors`` (static); SciPy's SuperLU factors it on the host as in
 :class:`socbjax.ColouredSparseLU`.  More colours than ``max_colors`` (a very crowded
-contact set) fail the solve (NaN direction: Newton reports ``singular``) with a warning that
-names the fix, never a wrong Jacobian.
+contact set) fail the solve, never a wrong Jacobian: the NaN direction comes with
+``stats["overflow"]``, and Newton reports ``RESULTS.colour_capacity`` (host-driven
+:func:`socbjax.compress` then doubles ``max_colors`` and goes on from its last step).
 
 The pair list is read from the linearisation point ``options["point"]`` (DampedNewton and the
 implicit adjoint pass it): a pair slot's first two unknowns are its segment ids.  The path
@@ -34,7 +35,6 @@ from __future__ import annotations
 
 import collections
 import functools
-import warnings
 
 import equinox as eqx
 import equinox.internal as eqxi
@@ -132,11 +132,7 @@ class PairGraph:
                 continue
             pick = lambda a, i=index: a[tuple(0 if a.shape[k] == 1 else j for k, j in enumerate(i))]  # noqa: E731
             block = rhs[where].reshape(-1, self.n)
-            if int(pick(count)) > max_colors:
-                warnings.warn(f"the contact pairs' Jacobian needs {int(pick(count))} colours, more than the "
-                              f"{max_colors} prepared: the solve fails; use fewer pairs per segment "
-                              f"(socbjax.Contact(per_segment=...)) or linear_solver='dense'", RuntimeWarning,
-                              stacklevel=1)
+            if int(pick(count)) > max_colors:  # reported as stats["overflow"] (RESULTS.colour_capacity)
                 x, sign = np.full(block.shape, np.nan), 0.0
             else:
                 indices, indptr, _, _, gather = self.pattern(pick(ids))
@@ -205,7 +201,7 @@ class PairedSparseLU(AbstractFullRankSolver):
         active = jnp.asarray(options.get("active", True), bool)
         x, sign = jax.pure_callback(host, out, products.astype(dtype), ids, count, vector.astype(dtype), active,
                                     vmap_method="expand_dims")
-        return x, lx.RESULTS.successful, {"sign": sign}
+        return x, lx.RESULTS.successful, {"sign": sign, "overflow": count > self.max_colors}
 
     def transpose(self, state, options):
         products, ids, count, transpose = state

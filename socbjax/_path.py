@@ -405,6 +405,7 @@ def _attempt(c: PathState, problem, param, settings, newton, recorder) -> PathSt
     out = RESULTS.where(small, failure, RESULTS.successful)
     out = RESULTS.where(~primed & ~ok, RESULTS.not_equilibrium, out)
     out = RESULTS.where(overflow & converged, RESULTS.contact_capacity, out)
+    out = RESULTS.where(result == RESULTS.colour_capacity, RESULTS.colour_capacity, out)  # no smaller step helps
     full = (steps >= settings.max_steps) | (attempts >= settings.max_attempts)
     out = RESULTS.where((out == RESULTS.successful) & ~done_ok & full, RESULTS.max_steps, out)
     return PathState(

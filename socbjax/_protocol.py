@@ -29,6 +29,7 @@ import numpy as np
 from jax.flatten_util import ravel_pytree
 
 from ._contact_near import grow_near_list
+from ._paired import PairedSparseLU
 from ._path import PathProblem, StepRecorder, follow_path, path_weights, start_path, state_unravel
 from ._path_settings import PathSettings
 from ._probe import observe
@@ -218,7 +219,7 @@ class _Run:
             length = self.chunk if next_save is None else max(min(self.chunk, next_save - before), 1)
             state, force = _chunk(problem, state, settings, self.inner, self.recorder, jnp.asarray(length, jnp.int32))
             steps = int(state.steps)  # waits for the chunk
-            if self._grow_near_list(state, ends[0] + float(state.p) * (ends[1] - ends[0])):
+            if self._grow(state, ends[0] + float(state.p) * (ends[1] - ends[0])):
                 problem = phase_problem(self.model, index, u0, self.u_max, self.settings)
                 state = eqx.tree_at(lambda s: (s.result, s.done), state, (RESULTS.successful, jnp.asarray(False)))
                 continue
@@ -231,11 +232,24 @@ class _Run:
             if done:
                 return state
 
-    def _grow_near_list(self, state, u: float) -> bool:
-        """After a near-list overflow (more segments near a surface than ``Contact(slot_capacity)``
-        lists: ``RESULTS.contact_capacity`` with the list in use), the model with twice the
-        list (:func:`socbjax._contact_near.grow_near_list`); the path goes on from its last
-        accepted state, which the overflowing step left unchanged.  Returns whether it grew."""
+    def _grow(self, state, u: float) -> bool:
+        """After an overflow that a larger capacity mends, that capacity doubled; the path goes
+        on from its last accepted state, which the overflowing step left unchanged (one more
+        compilation).  Returns whether anything grew.
+
+        * ``RESULTS.colour_capacity``: the pair solver's colours
+          (:class:`socbjax.PairedSparseLU` ``max_colors``);
+        * ``RESULTS.contact_capacity`` with the near list in use (more segments near a surface
+          than ``Contact(slot_capacity)``): the list
+          (:func:`socbjax._contact_near.grow_near_list`).
+        """
+        if result_name(state.result) == "colour_capacity" and isinstance(self.inner, PairedSparseLU):
+            size = 2 * self.inner.max_colors
+            warnings.warn(f"compress: the contact pairs' Jacobian needed more than the {self.inner.max_colors} colours "
+                          f"prepared at u = {u:.4g} µm; the solver grows to {size} and the path goes on from its last "
+                          "step (one more compilation)", stacklevel=6)
+            self.inner = dataclasses.replace(self.inner, max_colors=size)
+            return True
         setup = getattr(self.model, "contact", None)
         if setup is None or not setup.listed or result_name(state.result) != "contact_capacity":
             return False

@@ -23,8 +23,8 @@ One step evaluates the residual *and its linearisation* at a trial point (one
 
 Failures are statuses (:class:`socbjax.RESULTS`), never a silent answer: ``max_iterations``
 (Newton steps), ``line_search_failed`` (``max_backtracks`` halvings without decrease),
-``nonfinite`` (the residual at the start is NaN/inf) and ``singular`` (J singular away from
-a root).  On failure the best accepted iterate is returned.
+``nonfinite`` (the residual at the start is NaN/inf), ``singular`` (J singular away from
+a root) and ``colour_capacity`` (:class:`socbjax.PairedSparseLU` ran out of colours).  On failure the best accepted iterate is returned.
 """
 
 from __future__ import annotations
@@ -53,7 +53,7 @@ def _inf_norm(f) -> Array:
 def _stats_like(solver, n: int, dtype) -> dict:
     """Zero placeholders of the ``stats`` a socbjax linear solver returns (for the state;
     other lineax solvers report no sign: it stays 0)."""
-    stats = {"sign": jnp.zeros((), dtype)}
+    stats = {"sign": jnp.zeros((), dtype), "overflow": jnp.zeros((), bool)}
     if isinstance(solver, Bordered):
         stats["tangent"] = jnp.zeros((n - 1,), dtype)
     return stats
@@ -66,7 +66,8 @@ class NewtonState(eqx.Module):
     direction : the Newton direction from it;   alpha : step fraction of the current trial;
     backtracks : halvings since the last acceptance;  iterations : Newton steps taken;
     residual_norm : ‖f‖∞ at the accepted iterate;  stats : the linear solver's ``stats`` of
-    the last factorisation (``sign`` = sign(det J), ``tangent`` for :class:`Bordered`);
+    the last factorisation (``sign`` = sign(det J), ``tangent`` for :class:`Bordered`,
+    ``overflow``: :class:`socbjax.PairedSparseLU` ran out of colours);
     result : a :class:`socbjax.RESULTS` item;  done : the loop may stop.
     """
 
@@ -161,6 +162,9 @@ class DampedNewton(optx.AbstractRootFinder):
         base = jnp.where(accepted, y, state.accepted)
         result = RESULTS.where(first & ~finite, RESULTS.nonfinite, RESULTS.successful)
         result = RESULTS.where(bad_direction, RESULTS.singular, result)
+        # PairedSparseLU fails a solve whose pair list needs more colours than it prepared:
+        # a capacity, not a singular J (compress grows it).
+        result = RESULTS.where(bad_direction & stats["overflow"], RESULTS.colour_capacity, result)
         result = RESULTS.where(~converged & (backtracks > self.max_backtracks), RESULTS.line_search_failed, result)
         result = RESULTS.where(~converged & accepted & (iterations >= self.max_iterations), RESULTS.max_iterations, result)
         done = converged | (result != RESULTS.successful)

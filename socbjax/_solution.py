@@ -52,6 +52,11 @@ class RESULTS(optx.RESULTS):  # pyright: ignore
         "contact=socbjax.Contact(self_contact=False)); otherwise stop before it (a smaller displacement: "
         "see the 'surface_crossing' event in result.limit_points)"
     )
+    colour_capacity = (
+        "the sparse Jacobian of the contact pairs needs more colours than socbjax.PairedSparseLU prepared (a crowded "
+        "contact set); socbjax.compress doubles them and goes on; elsewhere pass linear_solver='dense' or fewer pairs "
+        "per segment (socbjax.Contact(per_segment=...))"
+    )
 
 
 # Status codes of format_version 1 result files (socbjax 0.1 `Status`), by name.

@@ -3,8 +3,11 @@
 generic states of a 3D outcrop with the surfaces and a pair list, and at a 2D state with a
 live pair; a self-contact solve with it against the same solve with dense LU."""
 
+import dataclasses
+
 import lineax as lx
 import numpy as np
+import optimistix as optx
 import pytest
 
 import equinox as eqx
@@ -154,3 +157,29 @@ def test_a_self_contact_solve_with_the_sparse_solver_equals_the_dense_one(presse
     sparse = sj.solve(net, forces={tip: LOAD}, contact=CONTACT, settings=sj.PathSettings(linear_solver="sparse"))
     np.testing.assert_allclose(np.asarray(sparse.positions), np.asarray(dense.positions), atol=1e-10)
     assert float(dense.positions[tip, 1]) > -0.12  # the stiff filament holds the tip up
+
+
+@pytest.mark.slow  # shares the pressed state (about 20 s)
+def test_a_pair_list_that_needs_more_colours_than_prepared_is_a_capacity_not_a_wrong_step(pressed):
+    """With fewer colours prepared than the pair list needs, the solve never returns a
+    direction built from a truncated Jacobian: it is NaN with ``stats["overflow"]``, and
+    Newton stops at once with ``RESULTS.colour_capacity`` (not ``singular``); the solver as
+    prepared converges from the same start (to an equilibrium of the held frames)."""
+    net, tip, dense = pressed
+    loads = np.array(net.loads)
+    loads[tip] = LOAD
+    model = sj.make_model(net.replace(loads=loads), contact=CONTACT)
+    solver = sj.linear_solver_for(model, "sparse")
+    frames = model.frames(dense.state)
+    x, fn = _flat_residual(model, dense.state, frames)
+    fn = lambda y, args, f=fn: f(y)  # noqa: E731
+    small = dataclasses.replace(solver, max_colors=8, chunk=8)
+    y0 = x + 1e-4 * np.random.default_rng(1).standard_normal(x.size)
+    op = lx.FunctionLinearOperator(lambda v: jax.jvp(lambda y: fn(y, None), (y0,), (v,))[1],
+                                   jax.ShapeDtypeStruct(x.shape, x.dtype))
+    direction, _, stats = small.compute(small.init(op, {"point": y0}), -fn(y0, None), {})
+    assert bool(stats["overflow"]) and not np.any(np.isfinite(np.asarray(direction)))
+    failed = optx.root_find(fn, sj.DampedNewton(linear_solver=small), y0, throw=False, max_steps=60)
+    assert failed.state.result == sj.RESULTS.colour_capacity and int(failed.state.iterations) == 0
+    solved = optx.root_find(fn, sj.DampedNewton(linear_solver=solver), y0, throw=False, max_steps=60)
+    assert solved.state.result == sj.RESULTS.successful and not bool(solved.state.stats["overflow"])
