@@ -213,7 +213,8 @@ def pair_rows(pairs, frame: PairList, outputs, network, setup, nodes):
     lowest = (jnp.linalg.norm(centers[:, 0] - centers[:, 1], axis=-1) - 0.5 * jnp.sum(length, axis=1)
               - 2.0 * setup.filament_radius)
     near = near_weight(lowest[:, None], length, setup.activation)
-    location = near * (sigma - jnp.clip(sigma - slope - bias, 0.0, 1.0)) + (1.0 - near) * (sigma - 0.5)
+    # s, not σ, inside the projection: slope 1 beyond the ends (see contact_slot_rows)
+    location = near * (sigma - jnp.clip(s - slope - bias, 0.0, 1.0)) + (1.0 - near) * (sigma - 0.5)
     # each side's node hand-over (as for obstacles): the slope at its end nodes of the distance
     # to the other side's closest point
     other = r[:, ::-1]  # [P, 2 sides, d]

@@ -359,7 +359,12 @@ def contact_slot_rows(ends, points, s, sigma, F, tangent, bend, shape, length, o
         # the normal part mixes the force's components, as in force_law_rows
         force = (F - 0.5 * jnp.sum(F * grad, axis=-1, keepdims=True) * grad - magnitude[:, None] * grad) / setup.force_scale
     else:
-        projected = sigma - jnp.clip(sigma - slope - bias, 0.0, 1.0)
+        # the projection of s − ∇φ·t, not of σ − ∇φ·t: beyond an end the curve point (and so the
+        # slope) stays at the end, and σ − clip(σ − slope) would be flat in σ there (a singular
+        # Jacobian: a pair slot at σ = 1 as its closest point moved back inside the segment,
+        # the 6-generation outcrop with self-contact); this row has slope 1 outside [0, 1] and
+        # the same roots
+        projected = sigma - jnp.clip(s - slope - bias, 0.0, 1.0)
         # d(∇φ·t)/dσ = l d²φ/ds², the projection row's slope: the projection where it is
         # clearly positive (a minimum), an end where it is not, C¹ in between
         convex = smoothstep(bend * length / jnp.where(pinned > 0, _PINNED_BEND, _BEND_BLEND))

@@ -10,6 +10,8 @@ from scipy.special import ellipe, ellipk
 
 import equinox as eqx
 import jax
+import jax.numpy as jnp
+from jax.flatten_util import ravel_pytree
 import socbjax as sj
 from conftest import two_filaments
 from socbjax.testing import clamped_elastica_lobe_gap, elastica_end_shortening, elastica_on_point_obstacle
@@ -390,3 +392,43 @@ def test_the_state_template_has_the_settled_states_structure():
     free = sj.make_model(net)
     for a, b in zip(jax.tree_util.tree_leaves(free.state_template()), jax.tree_util.tree_leaves(free.initial_state())):
         np.testing.assert_array_equal(np.asarray(a), np.asarray(b))
+
+
+def _sigma_column(model, state, frames, put, sigma):
+    """∂(residual)/∂σ [n] of the slot that ``put(state, σ)`` sets, at σ."""
+    def rows(value):
+        return ravel_pytree(model.residual(put(state, value), sj.Control.make(), frames))[0]
+    return np.asarray(jax.jacfwd(rows)(jnp.asarray(sigma, jnp.float64)))
+
+
+def test_a_slot_beyond_its_segment_end_keeps_a_regular_location_row():
+    """Beyond [0, 1] (a predictor or Newton iterate past an end, or a slot resting exactly on
+    an end) the curve is evaluated at the end, so nothing but the location row can depend on
+    σ there: that row must change with σ, or J is singular.  It was flat (σ − P(σ − ∇φ·t) with
+    ∇φ·t frozen at the end) and stalled the 6-generation outcrop with self-contact: a pair slot
+    held at σ = 1 while its closest point moved back inside the segment failed every step size.
+    Obstacle slot (a one-segment cantilever over a sphere, closest point σ = 0.45, where the
+    row vanishes) and pair slot (the two filaments of test_paired)."""
+    net = sj.cantilever(2, length=L, EI=EI, dim=2)
+    R = 0.05
+    sphere = sj.Sphere([0.45 * L, -(D / 2 + R + D / 20)], R)
+    model = sj.make_model(net, contact=sj.Contact(diameter=D, obstacles=(sphere,), self_contact=False, surfaces=False))
+    state = model.initial_state()
+    frames = model.frames(state)
+    put = lambda st, s: eqx.tree_at(lambda t: t.contacts, st, st.contacts.at[0, 0, 0].set(s))  # noqa: E731
+    for sigma in (1.0, 1.05, 1.3, 0.0, -0.1):
+        column = _sigma_column(model, state, frames, put, sigma)
+        assert np.max(np.abs(column)) > 0.5, sigma
+    row = int(np.argmax(np.abs(_sigma_column(model, state, frames, put, 1.05))))
+    at = lambda s: float(ravel_pytree(model.residual(put(state, s), sj.Control.make(), frames))[0][row])  # noqa: E731
+    assert abs(at(0.45)) < 1e-6 and abs(at(0.4)) > 1e-3  # the closest point, and only there
+
+    net, _ = two_filaments()
+    model = sj.make_model(net, contact=sj.Contact(diameter=D, surfaces=False, stiffness=1e6))
+    state = model.initial_state()
+    slots = state.pairs.at[0, :4].set(jnp.asarray([3.0, 9.0, 0.5, 0.5]))  # the tip segment (3) and the stiff one's 6th (9)
+    state = eqx.tree_at(lambda t: t.pairs, state, slots)
+    frames = (model.frames(state)[0], model.pair_list(state, rebuild=False))
+    put = lambda st, s: eqx.tree_at(lambda t: t.pairs, st, st.pairs.at[0, 3].set(s))  # noqa: E731
+    for sigma in (1.0, 1.05, -0.05):
+        assert np.max(np.abs(_sigma_column(model, state, frames, put, sigma))) > 0.5, sigma
