@@ -112,7 +112,9 @@ class Contact(eqx.Module):
         not share a node: other filaments and the same one), found by a fixed-capacity
         spatial-hash broad phase (:mod:`socbjax._contact_pairs`).  The pairs change the
         Jacobian's pattern from step to step: the sparse solver follows them
-        (:class:`socbjax.PairedSparseLU`, colours per pair list).
+        (:class:`socbjax.PairedSparseLU`, colours per pair list; a list that needs more
+        colours than it prepared is ``RESULTS.colour_capacity``, which
+        :func:`socbjax.compress` mends by doubling them, with a warning).
     capacity : pair slots (default max(8, S) for S segments); more candidates stop the path
         with ``RESULTS.contact_capacity``.
     per_segment : most pairs per segment (default 4; a hash cell holds up to twice as many

@@ -314,6 +314,7 @@ def dendritic_outcrop(
     max_redraws: int = 100,
     GJ: float | None = ACTIN_GJ,
     natural_curvature=None,
+    clearance: float = 0.0,
 ) -> Network:
     """Paper Fig. 7a: a dendritic actin outcrop grown from one nucleation seed on the probe.
 
@@ -326,18 +327,26 @@ def dendritic_outcrop(
     None: the paper's torsion-free model; see :func:`unit_dendritic_mesh`);
     ``natural_curvature`` the strands' rest shape (as for :func:`unit_dendritic_mesh`).  See
     the module docstring for the growth rules.  Strand ends on the surface are the pinned
-    nodes other than the probe node 0.  The growth does not keep strands apart: two of them
-    may pass closer than a filament diameter (the 8-generation outcrop, seed 0, has the centre
-    lines of segments 162 and 487 1.2 nm apart), so ``compress`` with self-contact
-    (``Contact()``) refuses such a network at its start, naming the pair; another seed, or
-    ``Contact(self_contact=False)``, runs.
+    nodes other than the probe node 0.
+
+    ``clearance`` (µm, 3D): the least distance between the centre lines of two strands, away
+    from their shared branch node.  A daughter whose straight path to the surface would pass
+    closer than that to another strand's (that strand's path to the surface: strands grow
+    straight) is redrawn, within ``max_redraws``; pass the filament diameter (actin: 0.007)
+    for runs with self-contact.  The default 0 keeps strands as drawn (and every network the
+    same as before the option): two of them may pass closer than a filament diameter (the
+    8-generation outcrop, seed 0, has the centre lines of segments 162 and 487 1.2 nm apart),
+    and ``compress`` with self-contact (``Contact()``) refuses such a network at its start,
+    naming the pair.  A clearance draws more random azimuths, so it grows another network
+    from the same seed.  2D strands cross in their plane: ``clearance`` is 3D only.
 
     Limits (checked before growing; ``TypeError`` for a wrong type, ``ValueError`` for a
     wrong value, naming the argument): ``generations`` an integer ≥ 1; ``gap``, ``growth``,
     ``segment_length`` (≤ ``growth``), ``EI`` finite and positive; ``perturbation`` finite
     and ≥ 0; ``branch_angle`` in [0.1°, 89.9°] (the first daughter of the mother, which grows
     along +z, must head toward the surface); ``seed`` an integer ≥ 0; ``max_redraws`` an
-    integer in 1..100,000; ``dim`` the integer 2 or 3.  At most 200,000 segments
+    integer in 1..100,000; ``dim`` the integer 2 or 3; ``clearance`` finite, ≥ 0 and below
+    ``segment_length``, 0 in 2D.  At most 200,000 segments
     (``socbjax._checks.MAX_SEGMENTS``): the growth stops with a ``ValueError`` naming
     ``generations`` as soon as it passes the limit (growth ends early, and costs nothing
     more, once every strand has reached the surface).
@@ -347,8 +356,62 @@ def dendritic_outcrop(
         generations, gap, growth, segment_length, EI, seed, max_redraws, perturbation)
     phi = _angle(branch_angle, high=90.0, why=": the first daughter branches off the mother, which grows along +z, and "
                  "must head toward the surface")
-    g = _grow_outcrop(generations, gap, growth, ell, phi, np.random.default_rng(seed), dim, max_redraws)
+    clearance = check_real("clearance", clearance, "µm", low=0.0, low_open=False)
+    if clearance and dim == 2:
+        raise ValueError(f"clearance={clearance!r} µm applies to 3D outcrops: 2D strands cross each other in their plane; "
+                         "use clearance=0 (the default) or dim=3")
+    if clearance >= ell:
+        raise ValueError(f"clearance={clearance!r} µm must be below segment_length ({ell} µm): a daughter's first segment "
+                         "must clear its mother; use the filament diameter (actin: 0.007 µm)")
+    g = _grow_outcrop(generations, gap, growth, ell, phi, np.random.default_rng(seed), dim, max_redraws, clearance)
     return g.build(EI, perturbation, seed, GJ, natural_curvature)
+
+
+def _surface_path(origin, direction, gap):
+    """(start, end) of the straight path from ``origin`` along unit ``direction`` to the
+    surface (last coordinate ``gap``), as Python floats."""
+    start = [float(x) for x in origin]
+    reach = (gap - start[-1]) / float(direction[-1])
+    return start, [a + reach * float(t) for a, t in zip(start, direction)]
+
+
+def _segment_distance(p0, p1, q0, q1) -> float:
+    """Least distance (µm) between the segments p0–p1 and q0–q1 (3D, exact: the clamped
+    closest points of Ericson, Real-Time Collision Detection, §5.1.9), in scalar arithmetic
+    (the same decision on every machine, as :func:`_rotate_away`)."""
+    dot = lambda a, b: a[0] * b[0] + a[1] * b[1] + a[2] * b[2]  # noqa: E731
+    d1, d2 = [b - a for a, b in zip(p0, p1)], [b - a for a, b in zip(q0, q1)]
+    r = [a - b for a, b in zip(p0, q0)]
+    a, e, f, c = dot(d1, d1), dot(d2, d2), dot(d2, r), dot(d1, r)
+    b = dot(d1, d2)
+    denom = a * e - b * b
+    s = min(max((b * f - c * e) / denom, 0.0), 1.0) if denom > 1e-18 * a * e else 0.0
+    t = (b * s + f) / e
+    if t < 0.0:
+        t, s = 0.0, min(max(-c / a, 0.0), 1.0)
+    elif t > 1.0:
+        t, s = 1.0, min(max((b - c) / a, 0.0), 1.0)
+    gap = [p + s * u - q - t * v for p, u, q, v in zip(p0, d1, q0, d2)]
+    return math.sqrt(dot(gap, gap))
+
+
+def _clear_daughter(mother, strands, paths, origin, phi, rng, max_redraws, clearance, gap, ell):
+    """A daughter direction (as :func:`_rotate_away`) whose straight path to the surface stays
+    ``clearance`` µm from every other strand's path; against its mother only beyond its first
+    segment (they share the branch node).  ValueError after ``max_redraws`` draws."""
+    mother_index = next(k for k, s in enumerate(strands) if s is mother)
+    for _ in range(max_redraws):
+        t_d = _rotate_away(mother["direction"], phi, rng, 3, max_redraws, mother["basis"])
+        start, end = _surface_path(origin, t_d, gap)
+        beyond = [a + ell * float(t) for a, t in zip(start, t_d)]
+        short = beyond[-1] >= gap  # no second segment: nothing but the shared node near the mother
+        if all((short and k == mother_index)
+               or _segment_distance(beyond if k == mother_index else start, end, *path) >= clearance
+               for k, path in enumerate(paths)):
+            return t_d
+    raise ValueError(f"clearance={clearance!r} µm: no daughter direction keeps that distance from the other strands "
+                     f"after max_redraws={max_redraws} draws (a daughter at {[round(float(x), 3) for x in origin]} µm); use a "
+                     "smaller clearance, a larger max_redraws, fewer generations or another seed")
 
 
 def _future_segments(growing, g, gap, growth, ell, remaining, first) -> int:
@@ -367,11 +430,13 @@ def _future_segments(growing, g, gap, growth, ell, remaining, first) -> int:
     return total
 
 
-def _grow_outcrop(generations, gap, growth, ell, phi, rng, dim, max_redraws) -> _Grower:
-    """The growth rules of the module docstring, stopped by the size guard."""
+def _grow_outcrop(generations, gap, growth, ell, phi, rng, dim, max_redraws, clearance=0.0) -> _Grower:
+    """The growth rules of the module docstring, stopped by the size guard; with a
+    ``clearance``, daughters redrawn as :func:`_clear_daughter` says."""
     axis = np.eye(dim)[-1]
     g = _Grower(dim)
     strands = [{"tip": g.node(np.zeros(dim), axis), "direction": axis, "stopped": False, "basis": None}]
+    paths = [_surface_path(np.zeros(dim), axis, gap)]  # each strand's straight path to the surface
     for generation in range(generations):
         growing = [s for s in strands if not s["stopped"]]
         if not growing:  # every strand has reached the surface: later generations change nothing
@@ -385,10 +450,15 @@ def _grow_outcrop(generations, gap, growth, ell, phi, rng, dim, max_redraws) -> 
             for s in growing:
                 if dim == 3 and s["basis"] is None:
                     s["basis"] = _lateral_basis(s["direction"])
-                t_d = _rotate_away(s["direction"], phi, rng, dim, max_redraws, s["basis"])
-                base = g.node(g.pos[s["tip"]], t_d)
+                origin = g.pos[s["tip"]]
+                if clearance:
+                    t_d = _clear_daughter(s, strands, paths, origin, phi, rng, max_redraws, clearance, gap, ell)
+                else:
+                    t_d = _rotate_away(s["direction"], phi, rng, dim, max_redraws, s["basis"])
+                base = g.node(origin, t_d)
                 g.attach.append((s["tip"], base))
                 strands.append({"tip": base, "direction": t_d, "stopped": False, "basis": None})
+                paths.append(_surface_path(origin, t_d, gap))
         for k, s in enumerate(strands):
             if s["stopped"]:
                 continue

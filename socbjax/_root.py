@@ -24,7 +24,8 @@ One step evaluates the residual *and its linearisation* at a trial point (one
 Failures are statuses (:class:`socbjax.RESULTS`), never a silent answer: ``max_iterations``
 (Newton steps), ``line_search_failed`` (``max_backtracks`` halvings without decrease),
 ``nonfinite`` (the residual at the start is NaN/inf), ``singular`` (J singular away from
-a root) and ``colour_capacity`` (:class:`socbjax.PairedSparseLU` ran out of colours).  On failure the best accepted iterate is returned.
+a root) and ``colour_capacity`` (:class:`socbjax.PairedSparseLU` ran out of colours).  On
+failure the best accepted iterate is returned.
 """
 
 from __future__ import annotations
