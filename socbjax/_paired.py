@@ -8,13 +8,16 @@ Jacobian's pattern is data, not structure.  :class:`PairedSparseLU` keeps it exa
 * the *static part* — every row and unknown with the pair list empty, where an idle slot
   depends on itself only — is the refined graph pattern of :mod:`socbjax._sparsity`, found
   once per topology;
-* the *pair part*, per pair list: the rows of pair p depend on every unknown within graph
-  distance 2 of segment i_p or j_p (where the segments' own rows' dependencies end: the
-  curve at the pair's points is the segment kernel's) and on the slots of the pairs that
-  share one of its segments (their forces act on the same kernels); the rows within distance
-  2 of i_p or j_p depend on p's unknowns (its force acts on both kernels, and through their
+* the *pair part*, per pair list: the rows of pair p depend on every unknown that a row of
+  segment i_p or j_p depends on in the static part (the curve at the pair's points is the
+  segment kernel's, which reads nothing else; the end nodes' places and directors that the
+  rows also read are the kernel's inputs too) and on the slots of the pairs that share one
+  of its segments (their forces act on the same kernels); the rows within graph distance 2
+  of i_p or j_p depend on p's unknowns (its force acts on both kernels, and through their
   end forces on the node rows).  A slot's two id unknowns stay out: their rows are
-  x_id − list id alone.
+  x_id − list id alone.  (The pair rows' dependencies were first taken as everything
+  within graph distance 2 of both segments: 317 unknowns for the widest pair row on the
+  6-generation outcrop with 21 pairs, 368 colours; from the kernel rows: 208 and 279.)
 
 Per distinct pair list (host side, cached): the union pattern, coloured greedily
 (:func:`socbjax._linear.color_columns`, Curtis–Powell–Reid).  The colours go to the device,
@@ -59,12 +62,12 @@ class PairGraph:
 
     static : (rows, cols) [nnz] of the static part (CSC order) over n unknowns.
     reach : [V, V] sparse, vertices within graph distance 2 (nodes 0..N−1, segments N..N+S−1).
-    row_vertex, unknown_vertex : [n₀] the vertex of each of the first n₀ = n − P·W rows and
-        unknowns (the pair slots are the last P·W of both).
+    row_vertex : [n₀] the vertex of each of the first n₀ = n − P·W rows (the pair slots' rows
+        are the last P·W).
     first_segment : N, the vertex of segment 0.
     """
 
-    def __init__(self, static, n: int, n_pairs: int, width: int, reach, row_vertex, unknown_vertex, first_segment: int):
+    def __init__(self, static, n: int, n_pairs: int, width: int, reach, row_vertex, first_segment: int):
         rows, cols = static
         self.n, self.n_pairs, self.width, self.first_segment = n, n_pairs, width, first_segment
         n0, V = n - n_pairs * width, reach.shape[0]
@@ -72,7 +75,10 @@ class PairGraph:
         self.static = _indicator(rows, cols, (n, n)).tocsc()
         self.reach = sp.csr_matrix(reach, dtype=np.int32)
         self.rows_at = _indicator(np.arange(n0), row_vertex, (n, V))
-        self.unknowns_at = _indicator(unknown_vertex, np.arange(n0), (V, n))
+        # [S, n]: the unknowns that some row of segment s depends on (its kernel's inputs)
+        on_segment = np.flatnonzero(np.asarray(row_vertex) >= first_segment)
+        segment_rows = _indicator(np.asarray(row_vertex)[on_segment] - first_segment, on_segment, (self.n_segments, n))
+        self.kernel_inputs = sp.csr_matrix((segment_rows @ self.static.tocsr()) != 0, dtype=np.int32)
         live = np.arange(2, width)  # a slot's ids depend on nothing else
         flat = n0 + (np.arange(n_pairs)[:, None] * width + live).ravel()
         self.live = _indicator(flat, np.repeat(np.arange(n_pairs), live.size), (n, n_pairs))
@@ -90,11 +96,10 @@ class PairGraph:
         pattern = self.static
         used = np.flatnonzero(np.all((ids >= 0) & (ids < self.n_segments), axis=1))
         if used.size:
-            inc = _indicator(np.repeat(used, 2), self.first_segment + ids[used].ravel(),
-                             (self.n_pairs, self.reach.shape[0]))
-            near = inc @ self.reach  # [P, V]: pair p — vertices within 2 of its segments
+            inc = _indicator(np.repeat(used, 2), ids[used].ravel(), (self.n_pairs, self.n_segments))  # [P, S]
+            near = inc @ self.reach[self.first_segment:]  # [P, V]: pair p — vertices within 2 of its segments
             share = inc @ inc.T  # [P, P]: pairs with a segment in common
-            pattern = (pattern + self.live @ near @ self.unknowns_at + self.rows_at @ near.T @ self.live.T
+            pattern = (pattern + self.live @ (inc @ self.kernel_inputs) + self.rows_at @ near.T @ self.live.T
                        + self.live @ share @ self.live.T)
         pattern = sp.csc_matrix(pattern != 0)
         pattern.sort_indices()

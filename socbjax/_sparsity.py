@@ -150,10 +150,10 @@ def _contact_local(template, rows, cols, found) -> np.ndarray:
 def _paired(model, static: ColouredSparseLU) -> PairedSparseLU:
     """The :class:`PairedSparseLU` of a model with pair slots, around its static part."""
     net, P, W = model.network, model.n_pairs, pair_width(model.network.dim)
-    unknown_vertex, row_vertex, edges, _ = model.structure()
+    _, row_vertex, edges, _ = model.structure()
     V, n0 = net.n_nodes + net.n_segments, static.n - P * W
     graph = PairGraph((static.rows.a, static.cols.a), static.n, P, W, graph_reach(edges, V), row_vertex[:n0],
-                      unknown_vertex[:n0], net.n_nodes)
+                      net.n_nodes)
     # a crowded segment: the columns near it, and the live unknowns of every pair at it and
     # at its neighbours share its rows (2 per_segment pairs: a hash cell holds that many).
     # Twice that: the greedy colouring goes past it (the 6-generation outcrop with self-contact
