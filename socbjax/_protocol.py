@@ -108,10 +108,16 @@ def _named_leaves(tree) -> dict:
     return {jax.tree_util.keystr(k): np.asarray(v) for k, v in jax.tree_util.tree_flatten_with_path(tree)[0]}
 
 
+# Path-state fields added after checkpoints were first written; a checkpoint without them
+# resumes with the fresh path's values (no step size to return to).
+_LATER_FIELDS = (".recover", ".streak")
+
+
 def _from_named(template, arrays: dict, where):
     """The path state ``template`` with its leaves from ``arrays``, each checked for the
     template's shape and dtype (a damaged or foreign checkpoint is refused, not resumed)."""
     paths, treedef = jax.tree_util.tree_flatten_with_path(template)
+    arrays = {**{k: np.asarray(v) for k, v in _named_leaves(template).items() if k in _LATER_FIELDS}, **arrays}
     missing = [jax.tree_util.keystr(k) for k, _ in paths if jax.tree_util.keystr(k) not in arrays]
     if missing:
         raise ValueError(f"{where} is not a valid socbjax checkpoint: it lacks the path-state fields {missing[:4]} "

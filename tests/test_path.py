@@ -97,6 +97,12 @@ def test_a_corner_of_the_path_is_passed_by_small_steps_only_when_allowed(method)
     state, x, p = results[1e-5]
     assert state.result == sj.RESULTS.successful and p[-1] == pytest.approx(1.0)
     np.testing.assert_allclose(x, np.tan(1.0) * np.maximum(p - 0.5, 0.0), atol=1e-9)
+    # past the corner the steps return to their size before the cut-backs fast (×4 per
+    # step, not grow = 1.5: from ≤ 1e-4 back to ≥ 0.04 in at most 8 steps, not 15)
+    step = np.hypot(np.diff(x), np.diff(p))
+    past = int(np.argmax(p > 0.5 + 1e-9))
+    assert step[past - 1] <= 1e-4 and step[:past - 1].max() >= 0.04
+    assert 0 < int(np.argmax(step[past:] >= 0.04)) <= 8
     stopped, _, p0 = results[0.0]
     assert stopped.result == sj.RESULTS.step_too_small and 0.5 - 1e-6 < p0.max() < 0.5 + 1e-6
 
