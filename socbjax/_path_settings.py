@@ -43,7 +43,9 @@ class PathSettings(eqx.Module):
     max_steps : accepted steps (compress: the capacity of the step buffers): 500 | 1000.
     max_attempts : attempted steps (accepted + rejected): 5000 | 5000.
     grow, fast_iterations : a step converging within ``fast_iterations`` Newton iterations
-        multiplies the next by ``grow``: 2.0, 5 | 1.5, 4.
+        multiplies the next by ``grow``: 2.0, 5 | 1.5, 4.  After cut-backs, fast steps
+        accepted in a row grow by 4 instead, back to the largest step cut back (a corner of
+        the path, passed with tiny steps, is followed by steps of the size before it).
     max_corrector_ratio : reject when the corrector moved farther than this fraction of the
         predicted increment (the path bends too sharply for the step): 0.5 | 0.5.
     max_turn : reject when the tangent turned by more than this (rad) in one step: π | 0.6.
