@@ -174,7 +174,7 @@ def test_a_clearance_keeps_the_strands_of_the_8_generation_outcrop_apart():
     """As drawn (clearance 0), the 8-generation outcrop of seed 0 has two strands whose centre
     lines pass 1.2 nm apart (segments 162 and 487), less than actin's 7 nm: a self-contact
     run would start in penetration.  With ``clearance=0.007`` no two segments that share no
-    node come closer than 7 nm, and the growth rules still hold."""
+    node come closer than 7 nm (to the sampling's 0.25 nm), and the growth rules still hold."""
     d = 0.007
     close = _closest_pieces(sj.dendritic_outcrop(generations=8, gap=6.0, seed=0), d)
     assert (162, 487) in close and close[(162, 487)] < 1.5e-3
