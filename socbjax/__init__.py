@@ -39,7 +39,8 @@ __all__ = [
     "dendritic_outcrop", "pad_outcrop", "Padding", "universal_strands", "probe_network", "strand_perturbation",
     "arc", "helix", "crimped_fibre", "with_natural_curvature", "thermal_network", "persistence_length", "ACTIN_GJ",
     # solving
-    "solve", "Solution", "FilamentCurve", "filament_curve", "buckling_load", "compress", "CompressionResult", "LimitPoint", "PHASES",
+    "solve", "Solution", "FilamentCurve", "filament_curve", "buckling_load", "compress", "CompressionResult",
+    "LimitPoint", "PHASES",
     "compress_ensemble", "EnsembleResult", "PathSettings", "NaturalParameter", "PseudoArclength", "Checkpoint",
     "follow_path", "start_path", "PathProblem", "PathState", "StepRecorder", "NoRecorder",
     "RESULTS", "ConvergenceError", "default_atol",

@@ -61,7 +61,8 @@ class PairGraph:
     """Host data of the pair part of a topology (built once, cached; hashed by identity).
 
     static : (rows, cols) [nnz] of the static part (CSC order) over n unknowns.
-    reach : [V, V] sparse, vertices within graph distance 2 (nodes 0..N−1, segments N..N+S−1).
+    reach : [V, V] sparse, vertices within graph distance 2 (nodes 0..N−1, segments N..N+S−1);
+        only the segments' rows are kept.
     row_vertex : [n₀] the vertex of each of the first n₀ = n − P·W rows (the pair slots' rows
         are the last P·W).
     first_segment : N, the vertex of segment 0.
@@ -73,7 +74,7 @@ class PairGraph:
         n0, V = n - n_pairs * width, reach.shape[0]
         self.n_segments = V - first_segment
         self.static = _indicator(rows, cols, (n, n)).tocsc()
-        self.reach = sp.csr_matrix(reach, dtype=np.int32)
+        self.segment_reach = sp.csr_matrix(reach, dtype=np.int32)[first_segment:]  # [S, V]
         self.rows_at = _indicator(np.arange(n0), row_vertex, (n, V))
         # [S, n]: the unknowns that some row of segment s depends on (its kernel's inputs)
         on_segment = np.flatnonzero(np.asarray(row_vertex) >= first_segment)
@@ -97,7 +98,7 @@ class PairGraph:
         used = np.flatnonzero(np.all((ids >= 0) & (ids < self.n_segments), axis=1))
         if used.size:
             inc = _indicator(np.repeat(used, 2), ids[used].ravel(), (self.n_pairs, self.n_segments))  # [P, S]
-            near = inc @ self.reach[self.first_segment:]  # [P, V]: pair p — vertices within 2 of its segments
+            near = inc @ self.segment_reach  # [P, V]: pair p — vertices within 2 of its segments
             share = inc @ inc.T  # [P, P]: pairs with a segment in common
             pattern = (pattern + self.live @ (inc @ self.kernel_inputs) + self.rows_at @ near.T @ self.live.T
                        + self.live @ share @ self.live.T)

@@ -427,8 +427,9 @@ def _attempt(c: PathState, problem, param, settings, newton, recorder) -> PathSt
 # stretch far shorter than the step), fast steps accepted in a row grow by this factor instead
 # of PathSettings.grow until they are back at the largest step cut back.  At grow = 1.5 a cut
 # from 0.05 to 1e-6 took 27 steps to grow back (83 of the 237 steps of the 6-generation
-# outcrop's run with the surfaces moved the probe by less than 1e-3 µm).  In a row: while the path still approaches the corner, accepted
-# and rejected steps alternate, and a return there only adds rejections.
+# outcrop's run with the surfaces moved the probe by less than 1e-3 µm).  In a row: while
+# the path still approaches the corner, accepted and rejected steps alternate, and a return
+# there only adds rejections.
 _RETURN = 4.0
 
 

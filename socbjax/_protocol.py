@@ -225,7 +225,8 @@ class _Run:
             length = self.chunk if next_save is None else max(min(self.chunk, next_save - before), 1)
             state, force = _chunk(problem, state, settings, self.inner, self.recorder, jnp.asarray(length, jnp.int32))
             steps = int(state.steps)  # waits for the chunk
-            if self._grow(state, ends[0] + float(state.p) * (ends[1] - ends[0])):
+            u = ends[0] + float(state.p) * (ends[1] - ends[0])
+            if self._grow(state, u):
                 problem = phase_problem(self.model, index, u0, self.u_max, self.settings)
                 state = eqx.tree_at(lambda s: (s.result, s.done), state, (RESULTS.successful, jnp.asarray(False)))
                 continue
@@ -234,7 +235,7 @@ class _Run:
             if not done and next_save is not None and steps >= next_save:  # saved before reporting: an
                 self._save(index, state)  # interrupt in the report loses nothing
                 next_save = steps + every
-            self.progress(self.names[index], ends[0] + float(state.p) * (ends[1] - ends[0]), steps, float(force), done)
+            self.progress(self.names[index], u, steps, float(force), done)
             if done:
                 return state
 
